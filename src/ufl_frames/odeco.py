@@ -1,0 +1,364 @@
+r"""Pointwise algebra of 2D Odeco tensors, vectorised over vertices (note §2.1).
+
+A frame is two orthogonal branches: the unit direction :math:`\hat u = (\cos t, \sin t)`
+with length :math:`l_1` and :math:`\hat v = (-\sin t, \cos t)` with length :math:`l_2`.
+Its Odeco tensor (note eq. 1) is :math:`T = l_1 \hat u^{\otimes 4} + l_2 \hat v^{\otimes 4}`,
+and the tensor polynomial on the unit circle :math:`x = (\cos\varphi, \sin\varphi)` is
+
+.. math::  p(\varphi) = \tfrac{3s}{8} + \tfrac{d}{2}\cos 2(\varphi - t)
+                        + \tfrac{s}{8}\cos 4(\varphi - t), \qquad s = l_1 + l_2,\ d = l_1 - l_2.
+
+Harmonic basis (note eq. 2) and normalisation used throughout the package::
+
+    Y = (1/sqrt(2), cos 2φ, sin 2φ, cos 4φ, sin 4φ),      p = Σ_j q_j Y_j,
+
+orthonormal for the inner product (1/π)∫₀^{2π} f g dφ, so that |q|² = (1/π)∫ p² dφ:
+the Euclidean norm of q is the L² norm of the tensor polynomial, invariant under
+rotations. A frame has
+
+    q = (3√2 s/8,  (d/2) cos 2t, (d/2) sin 2t,  (s/8) cos 4t, (s/8) sin 4t).
+
+With a = q0/√2, B = q1 + i q2 and C = q3 + i q4 the Odeco variety (note eq. 3) is
+a² = 9|C|² and aB = 3 B̄C, here written as three real quadratics q^T A_m q = 0:
+
+    g1 = q0² − 18 (q3² + q4²)
+    g2 = q0 q1 − 3√2 (q1 q3 + q2 q4)
+    g3 = q0 q2 − 3√2 (q1 q4 − q2 q3)
+
+Directions are read from C (arg C = 4t), lengths from (q0, C) and B.
+
+Projection. For a fixed angle t the frames form the plane spanned by the orthogonal
+vectors e_s(t), e_d(t) (q = s e_s + d e_d), so the best (s, d) is an orthogonal
+projection, and the remaining function of θ = 4t is a trigonometric polynomial of
+degree 2, maximised by safeguarded Newton iterations from the maximisers of its two
+harmonics. This is the exact closest point — exact on Odeco inputs, isotropic ones
+included — unlike the note's Mandel-eigenvector projection (``method="mandel"``),
+which is kept for comparison and is unstable near isotropy (see NOTES §2).
+
+No DOLFINx here: every function takes and returns NumPy arrays of shape (N, 5).
+"""
+
+import numpy as np
+
+SQRT2 = np.sqrt(2.0)
+
+#: Symmetric matrices A_m of the variety equations g_m(q) = q^T A_m q (note eq. 3).
+VARIETY_MATRICES = np.zeros((3, 5, 5))
+VARIETY_MATRICES[0, 0, 0] = 1.0
+VARIETY_MATRICES[0, 3, 3] = VARIETY_MATRICES[0, 4, 4] = -18.0
+# g2 = q0 q1 - 3√2 (q1 q3 + q2 q4)
+for (i, j), c in {(0, 1): 1.0, (1, 3): -3 * SQRT2, (2, 4): -3 * SQRT2}.items():
+    VARIETY_MATRICES[1, i, j] = VARIETY_MATRICES[1, j, i] = c / 2
+# g3 = q0 q2 - 3√2 (q1 q4 - q2 q3)
+for (i, j), c in {(0, 2): 1.0, (1, 4): -3 * SQRT2, (2, 3): 3 * SQRT2}.items():
+    VARIETY_MATRICES[2, i, j] = VARIETY_MATRICES[2, j, i] = c / 2
+
+_ES_NORM2 = 19.0 / 64.0  # |e_s(t)|², independent of t
+_ED_NORM2 = 1.0 / 4.0  # |e_d(t)|²
+_NEWTON_ITERATIONS = 5
+
+
+# --- input checking -------------------------------------------------------------
+
+
+def _check_q(q, name="q") -> np.ndarray:
+    q = np.asarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 5:
+        raise ValueError(f"{name} must have shape (N, 5), got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        bad = int(np.count_nonzero(~np.all(np.isfinite(q), axis=1)))
+        raise ValueError(f"{name} has {bad} row(s) with NaN or Inf")
+    return q
+
+
+def _check_nonzero(q: np.ndarray) -> None:
+    zero = ~np.any(q != 0.0, axis=1)
+    if np.any(zero):
+        raise ValueError(
+            f"q has {int(zero.sum())} zero tensor(s): a zero tensor has no frame to project to"
+        )
+
+
+# --- frames <-> coefficients ----------------------------------------------------
+
+
+def _q_from_parameters(s, d, cos2t, sin2t, cos4t, sin4t) -> np.ndarray:
+    """q = s e_s(t) + d e_d(t) for arrays of shape (N,)."""
+    return np.stack(
+        [3 * SQRT2 / 8 * s, d / 2 * cos2t, d / 2 * sin2t, s / 8 * cos4t, s / 8 * sin4t], axis=1
+    )
+
+
+def frames_to_q(lengths, angles) -> np.ndarray:
+    """Odeco coefficients of frames (note eqs. 1–2).
+
+    ``lengths`` (N, 2) holds (l1, l2): l1 along (cos t, sin t), l2 along (−sin t, cos t);
+    ``angles`` (N,) holds t. Returns q of shape (N, 5).
+    """
+    lengths = np.asarray(lengths, dtype=np.float64)
+    angles = np.asarray(angles, dtype=np.float64)
+    if lengths.ndim != 2 or lengths.shape[1] != 2:
+        raise ValueError(f"lengths must have shape (N, 2), got {lengths.shape}")
+    if angles.shape != (lengths.shape[0],):
+        raise ValueError(f"angles must have shape ({lengths.shape[0]},), got {angles.shape}")
+    if not (np.all(np.isfinite(lengths)) and np.all(np.isfinite(angles))):
+        raise ValueError("lengths and angles must be finite")
+    s = lengths[:, 0] + lengths[:, 1]
+    d = lengths[:, 0] - lengths[:, 1]
+    return _q_from_parameters(
+        s, d, np.cos(2 * angles), np.sin(2 * angles), np.cos(4 * angles), np.sin(4 * angles)
+    )
+
+
+def q_to_frames(q) -> tuple[np.ndarray, np.ndarray]:
+    """Lengths (N, 2) and angles (N,) in (−π/4, π/4] of the frames nearest to q.
+
+    Exact (up to rounding) when q lies on the Odeco variety. The frame symmetries
+    (t → t + π/2 with l1 ↔ l2, and t → t + π) are resolved by returning t in
+    (−π/4, π/4]; l1 is the length along (cos t, sin t).
+    """
+    q = _check_q(q)
+    _check_nonzero(q)
+    s, d, c4, s4 = _closest_parameters(q, isotropic=False)
+    lengths = np.stack([(s + d) / 2, (s - d) / 2], axis=1)
+    return lengths, np.arctan2(s4, c4) / 4
+
+
+def branch_vectors(q) -> tuple[np.ndarray, np.ndarray]:
+    """Scaled branches u = l1 û and v = l2 v̂ (each (N, 2)) of the frames nearest to q."""
+    lengths, t = q_to_frames(q)
+    uhat = np.stack([np.cos(t), np.sin(t)], axis=1)
+    vhat = np.stack([-np.sin(t), np.cos(t)], axis=1)
+    return lengths[:, :1] * uhat, lengths[:, 1:] * vhat
+
+
+# --- the variety ----------------------------------------------------------------
+
+
+def variety_residual(q) -> np.ndarray:
+    """The three variety equations g_m(q) = q^T A_m q (note eq. 3), shape (N, 3)."""
+    q = _check_q(q)
+    return np.einsum("ni,mij,nj->nm", q, VARIETY_MATRICES, q)
+
+
+def tangent_project(q, dq) -> np.ndarray:
+    """Project steps ``dq`` onto the tangent spaces of the variety at ``q`` (note §3, step 2).
+
+    The normal space at q is spanned by the gradients A_m q of the three equations,
+    which have rank 2 only (the variety is 3-dimensional in R⁵, NOTES §1), so the
+    normals are orthonormalised through the pseudo-inverse of their Gram matrix
+    (eigenvalues below a relative 1e-10 are discarded) before they are removed.
+    """
+    q = _check_q(q)
+    dq = _check_q(dq, "dq")
+    if dq.shape != q.shape:
+        raise ValueError(f"dq must have the shape of q {q.shape}, got {dq.shape}")
+    normals = np.einsum("mij,nj->nim", VARIETY_MATRICES, q)  # (N, 5, 3)
+    gram = np.einsum("nim,nik->nmk", normals, normals)
+    w, v = np.linalg.eigh(gram)  # ascending
+    keep = w > 1e-10 * w[:, -1:]
+    inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
+    basis = np.einsum("nim,nmk->nik", normals, v)  # orthogonal columns, norms √w
+    coeff = np.einsum("nik,ni->nk", basis, dq) * inv_w
+    return dq - np.einsum("nik,nk->ni", basis, coeff)
+
+
+def tangent_basis(q) -> np.ndarray:
+    """Orthonormal basis (N, 5, 3) of the tangent space of the variety at the frames nearest q.
+
+    Columns: e_s (total length), e_d (length difference) and ∂q/∂t (rotation), which
+    are mutually orthogonal for every frame. Used to reduce second-order methods
+    to the 3 tangent degrees of freedom per vertex.
+    """
+    q = _check_q(q)
+    _check_nonzero(q)
+    s, d, c4, s4 = _closest_parameters(q, isotropic=False)
+    c2, s2 = _half_angle(c4, s4)
+    zero = np.zeros_like(s)
+    e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
+    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
+    dq_dt = np.stack([zero, -d * s2, d * c2, -s * s4 / 2, s * c4 / 2], axis=1)
+    basis = np.stack([e_s, e_d, dq_dt], axis=2)
+    return basis / np.linalg.norm(basis, axis=1, keepdims=True)
+
+
+# --- projections ----------------------------------------------------------------
+
+
+def _half_angle(c, s):
+    """cos and sin of θ/2 ∈ (−π/2, π/2] from cos θ, sin θ, without cancellation."""
+    right = c >= 0
+    big = np.sqrt(np.clip((1 + np.abs(c)) / 2, 0.0, None))  # the larger of |cos|, |sin| of θ/2
+    small = s / (2 * big)
+    ch = np.where(right, big, np.abs(small))
+    sh = np.where(right, small, np.where(s < 0, -big, big))
+    return ch, sh
+
+
+def _unit(x, y):
+    """(x, y) normalised; (1, 0) where both vanish."""
+    r = np.hypot(x, y)
+    ok = r > 0
+    safe = np.where(ok, r, 1.0)
+    return np.where(ok, x / safe, 1.0), np.where(ok, y / safe, 0.0)
+
+
+def _harmonics(coeffs, c, s):
+    """f(θ) − const = A1 cos θ + B1 sin θ + A2 cos 2θ + B2 sin 2θ."""
+    a1, b1, a2, b2 = coeffs
+    return a1 * c + b1 * s + a2 * (c * c - s * s) + b2 * 2 * s * c
+
+
+def _newton(coeffs, c, s, iterations):
+    """Safeguarded Newton ascent on f(θ), carried as (cos θ, sin θ); returns the last step."""
+    a1, b1, a2, b2 = coeffs
+    lipschitz = np.abs(a1) + np.abs(b1) + 4 * (np.abs(a2) + np.abs(b2)) + 1e-300
+    step = np.zeros_like(c)
+    for _ in range(iterations):
+        c2, s2 = c * c - s * s, 2 * s * c
+        df = b1 * c - a1 * s + 2 * (b2 * c2 - a2 * s2)
+        d2f = -(a1 * c + b1 * s) - 4 * (a2 * c2 + b2 * s2)
+        # Newton where f is concave, otherwise a gradient-ascent step of size 1/L.
+        step = df / np.where(d2f < -1e-3 * lipschitz, -d2f, lipschitz)
+        # Rotate (c, s) by atan(step): no trigonometric calls.
+        scale = 1.0 / np.sqrt(1.0 + step * step)
+        c, s = (c - step * s) * scale, (s + step * c) * scale
+    return c, s, step
+
+
+def _best_lengths(q, c4, s4, isotropic):
+    """Least-squares (s, d) for the angle θ = 4t given by (cos θ, sin θ)."""
+    c2, s2 = _half_angle(c4, s4)
+    s = (3 * SQRT2 / 8 * q[:, 0] + (q[:, 3] * c4 + q[:, 4] * s4) / 8) / _ES_NORM2
+    if isotropic:
+        return s, np.zeros_like(s), c2, s2
+    d = (q[:, 1] * c2 + q[:, 2] * s2) / 2 / _ED_NORM2
+    return s, d, c2, s2
+
+
+def _closest_parameters(q, isotropic):
+    r"""(s, d, cos 4t, sin 4t) of the Odeco tensor closest to q.
+
+    Maximises f(θ) = (α + q3 cos θ + q4 sin θ)²/19 + (q1 cos θ/2 + q2 sin θ/2)², α = 3√2 q0,
+    which is |q|² minus the squared distance to the best frame at angle t = θ/4.
+    Expanded: f = const + A1 cos θ + B1 sin θ + A2 cos 2θ + B2 sin 2θ.
+    """
+    q0, q1, q2, q3, q4 = q.T
+    alpha = 3 * SQRT2 * q0
+    if isotropic:
+        # Only the first term: θ = arg C, or arg C + π when that makes α + |C| cos larger.
+        c, s = _unit(q3, q4)
+        flip = alpha < 0
+        c, s = np.where(flip, -c, c), np.where(flip, -s, s)
+        s_len, d_len, _, _ = _best_lengths(q, c, s, isotropic=True)
+        return s_len, d_len, c, s
+
+    a1 = 2 * alpha * q3 / 19 + (q1**2 - q2**2) / 2
+    b1 = 2 * alpha * q4 / 19 + q1 * q2
+    a2 = (q3**2 - q4**2) / 38
+    b2 = q3 * q4 / 19
+    coeffs = (a1, b1, a2, b2)
+
+    # Fast path: Newton from the maximiser of the first harmonic. When its amplitude
+    # R1 exceeds 5 R2 (R2 that of the second harmonic) f has a single local maximum,
+    # in the arc |sin(θ − arg)| < 2 R2/R1 where f'' < 0: Newton converges to it.
+    c, s = _unit(a1, b1)
+    c, s, step = _newton(coeffs, c, s, _NEWTON_ITERATIONS)
+    unsure = (np.hypot(a1, b1) <= 5 * np.hypot(a2, b2)) | (np.abs(step) > 1e-9)
+    if np.any(unsure):
+        # Slow path: up to two local maxima. Start also from both maximisers of the
+        # second harmonic, iterate longer and keep the best of the three.
+        sub = tuple(x[unsure] for x in coeffs)
+        c2, s2 = _half_angle(*_unit(sub[2], sub[3]))
+        starts_c = np.stack([c[unsure], c2, -c2])
+        starts_s = np.stack([s[unsure], s2, -s2])
+        cs, ss, _ = _newton(sub, starts_c, starts_s, 4 * _NEWTON_ITERATIONS)
+        best = np.argmax(_harmonics(sub, cs, ss), axis=0)
+        cols = np.arange(best.size)
+        c[unsure], s[unsure] = cs[best, cols], ss[best, cols]
+    s_len, d_len, _, _ = _best_lengths(q, c, s, isotropic=False)
+    return s_len, d_len, c, s
+
+
+def _project_mandel(q, isotropic):
+    """The note's geometric projection (§2.1, eqs. 4–5) through Mandel eigentensors."""
+    tensors = tensor_components(q)
+    t1111, t1112, t1122, t1222, t2222 = tensors.T
+    r2 = SQRT2
+    mandel = np.stack(
+        [
+            np.stack([t1111, t1122, r2 * t1112], axis=-1),
+            np.stack([t1122, t2222, r2 * t1222], axis=-1),
+            np.stack([r2 * t1112, r2 * t1222, 2 * t1122], axis=-1),
+        ],
+        axis=1,
+    )
+    w, v = np.linalg.eigh(mandel)  # ascending: keep the two largest
+    dmat = np.zeros((q.shape[0], 2, 2))
+    for k in (1, 2):
+        vk = v[:, :, k]
+        dk = np.stack(
+            [np.stack([vk[:, 0], vk[:, 2] / r2], -1), np.stack([vk[:, 2] / r2, vk[:, 1]], -1)],
+            axis=1,
+        )
+        dmat += w[:, k, None, None] * dk
+    lam, vec = np.linalg.eigh(dmat)
+    angles = np.arctan2(vec[:, 1, 0], vec[:, 0, 0])  # direction of lam[:, 0]
+    if isotropic:
+        lam = np.repeat(lam.mean(axis=1, keepdims=True), 2, axis=1)
+    return frames_to_q(lam, angles)
+
+
+def tensor_components(q) -> np.ndarray:
+    """Independent components (T1111, T1112, T1122, T1222, T2222) of the tensor of q."""
+    q = _check_q(q)
+    # Each harmonic as a quartic form in the monomials x⁴, x³y, x²y², xy³, y⁴.
+    forms = np.array(
+        [
+            [1 / SQRT2, 0, 2 / SQRT2, 0, 1 / SQRT2],  # (x² + y²)² / √2
+            [1, 0, 0, 0, -1],  # cos 2φ = x⁴ − y⁴ on the circle
+            [0, 2, 0, 2, 0],  # sin 2φ
+            [1, 0, -6, 0, 1],  # cos 4φ
+            [0, 4, 0, -4, 0],  # sin 4φ
+        ]
+    )
+    monomial = q @ forms
+    return monomial / np.array([1.0, 4.0, 6.0, 4.0, 1.0])
+
+
+def project(q, isotropic: bool = False, method: str = "closest") -> np.ndarray:
+    """Nearest Odeco tensors (note §2.1, §3 step 4); with ``isotropic`` the nearest with l1 = l2.
+
+    ``method="closest"`` (default) is the exact Euclidean closest point in q (see
+    module docstring); ``method="mandel"`` is the note's eigentensor projection,
+    kept for comparison only.
+    """
+    q = _check_q(q)
+    _check_nonzero(q)
+    if method == "mandel":
+        return _project_mandel(q, isotropic)
+    if method != "closest":
+        raise ValueError(f"unknown projection method {method!r}: use 'closest' or 'mandel'")
+    s, d, c4, s4 = _closest_parameters(q, isotropic)
+    c2, s2 = _half_angle(c4, s4)
+    return _q_from_parameters(s, d, c2, s2, c4, s4)
+
+
+def project_aligned(q, normals, isotropic: bool = False) -> np.ndarray:
+    """Boundary projection (note §3): orientation fixed by ``normals`` (N, 2), lengths free.
+
+    One branch is aligned with the normal (the other with the tangent); the lengths
+    are the least-squares fit of q at that orientation.
+    """
+    q = _check_q(q)
+    normals = np.asarray(normals, dtype=np.float64)
+    if normals.shape != (q.shape[0], 2):
+        raise ValueError(f"normals must have shape ({q.shape[0]}, 2), got {normals.shape}")
+    norm = np.linalg.norm(normals, axis=1)
+    if not np.all(np.isfinite(norm)) or np.any(norm == 0):
+        raise ValueError("normals must be finite and non-zero")
+    c1, s1 = normals[:, 0] / norm, normals[:, 1] / norm
+    c2, s2 = c1 * c1 - s1 * s1, 2 * s1 * c1
+    c4, s4 = c2 * c2 - s2 * s2, 2 * s2 * c2
+    s, d, c2, s2 = _best_lengths(q, c4, s4, isotropic)
+    return _q_from_parameters(s, d, c2, s2, c4, s4)
