@@ -1,0 +1,103 @@
+r"""UFL forms of the integrability and Dirichlet energies on P1 frame fields (note §3).
+
+The frame field is q ∈ [P1]⁵: the Odeco coefficients (see :mod:`ufl_frames.odeco`) at
+the vertices, interpolated linearly in each triangle. With the Lie bracket of eq. (10)
+
+.. math::  [u, v]_i = C_{ijkl}\, q_l\, \partial_k q_j
+
+the energies are
+
+.. math::  H(q) = \tfrac12 \int_\Omega |[u, v]|^2 \,dx \quad\text{(eq. 11)}, \qquad
+           E(q) = \tfrac12 \int_\Omega |\nabla q|^2 \,dx .
+
+Their first variations come from :func:`ufl.derivative`; DOLFINx assembles them into
+PETSc vectors. The integrand of H is a polynomial of degree 2 on each triangle, so
+the quadrature is exact: the only discretisation error is the P1 interpolation of q.
+"""
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+import dolfinx.fem as fem  # noqa: E402
+import ufl  # noqa: E402
+
+from ufl_frames import odeco  # noqa: E402
+from ufl_frames.bracket import BRACKET_ENTRIES  # noqa: E402
+
+
+def frame_space(mesh) -> fem.FunctionSpace:
+    """The P1 space of frame fields: 5 Odeco coefficients per vertex."""
+    if mesh.topology.dim != 2 or mesh.geometry.dim != 2:
+        raise ValueError(
+            f"frame fields need a planar 2D mesh, got topological dimension "
+            f"{mesh.topology.dim} in {mesh.geometry.dim}D"
+        )
+    return fem.functionspace(mesh, ("Lagrange", 1, (5,)))
+
+
+def interpolate_frames(V, f, name: str = "q") -> fem.Function:
+    """The Function of Odeco coefficients of the frames ``f(x) -> (l1, l2, angle)``.
+
+    ``x`` has shape (3, M) (points of the vertices); the frame at each vertex is
+    encoded exactly (note eqs. 1–2), so q lies on the Odeco variety at every vertex.
+    """
+    q = fem.Function(V, name=name)
+    x = V.tabulate_dof_coordinates().T
+    l1, l2, angle = (np.broadcast_to(np.asarray(a, dtype=np.float64), x.shape[1:]) for a in f(x))
+    q.x.array[:] = odeco.frames_to_q(np.stack([l1, l2], axis=1), angle).ravel()
+    return q
+
+
+def lie_bracket(q) -> ufl.core.expr.Expr:
+    """[u, v] as a UFL vector expression (note eq. 10)."""
+    grad_q = ufl.grad(q)
+    components = []
+    for i in range(2):
+        terms = [c * q[l] * grad_q[j, k] for (ii, j, k, l), c in BRACKET_ENTRIES.items() if ii == i]
+        components.append(sum(terms[1:], terms[0]))
+    return ufl.as_vector(components)
+
+
+def integrability_energy_form(q) -> ufl.Form:
+    """H(q) = ½ ∫ |[u, v]|² dx (note eq. 11) as a UFL form."""
+    bracket = lie_bracket(q)
+    return 0.5 * ufl.inner(bracket, bracket) * ufl.dx
+
+
+def dirichlet_energy_form(q) -> ufl.Form:
+    """E(q) = ½ ∫ |∇q|² dx as a UFL form."""
+    return 0.5 * ufl.inner(ufl.grad(q), ufl.grad(q)) * ufl.dx
+
+
+def gradient_form(energy: ufl.Form, q) -> ufl.Form:
+    """First variation dE(q)[w] of an energy, w the test function (for assembly into a Vec)."""
+    return ufl.derivative(energy, q, ufl.TestFunction(q.function_space))
+
+
+def gauss_newton_form(q) -> ufl.Form:
+    r"""Gauss–Newton bilinear form ∫ D[u,v](q)[w] · D[u,v](q)[δq] dx of H (J^T J)."""
+    V = q.function_space
+    bracket = lie_bracket(q)
+    w, dq = ufl.TestFunction(V), ufl.TrialFunction(V)
+    return ufl.inner(ufl.derivative(bracket, q, dq), ufl.derivative(bracket, q, w)) * ufl.dx
+
+
+def assemble_energy(form) -> float:
+    """Assemble a scalar form (UFL or compiled) over all ranks (collective)."""
+    compiled = form if isinstance(form, fem.Form) else fem.form(form)
+    mesh = compiled.mesh
+    return mesh.comm.allreduce(fem.assemble_scalar(compiled), op=MPI.SUM)
+
+
+def integrability_energy(q) -> float:
+    """H(q) (note eq. 11) of a frame Function q, collective over MPI."""
+    return assemble_energy(integrability_energy_form(q))
+
+
+def dirichlet_energy(q) -> float:
+    """E(q) = ½ ∫ |∇q|² dx of a frame Function q, collective over MPI."""
+    return assemble_energy(dirichlet_energy_form(q))

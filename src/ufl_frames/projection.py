@@ -1,0 +1,163 @@
+"""Pointwise projections applied to a whole P1 frame field (note §3, steps 2, 4 and 5).
+
+The kernels are those of :mod:`ufl_frames.odeco`; this module knows which vertices
+are on the boundary, the boundary orientation there, the lumped-mass weights of the
+vertices, and works on the local rows (owned and ghost) of ``q.x.array``. Every
+operation is pointwise and deterministic, so ghost rows stay equal to their owners'
+without communication; only norms are reduced over MPI.
+
+Boundary orientation. At a boundary vertex one branch is aligned with the normal.
+The normal is averaged in the 4-fold representation, e^{4iψ}, over the adjacent
+boundary edges (weighted by length): at a right-angled corner both edges give the
+same cross, at other corners the average is the cross closest to both.
+"""
+
+from dataclasses import dataclass
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+import dolfinx  # noqa: E402
+import dolfinx.fem as fem  # noqa: E402
+import ufl  # noqa: E402
+
+from ufl_frames import odeco  # noqa: E402
+
+
+@dataclass(frozen=True)
+class FrameConstraints:
+    """Where and how the frame field is constrained (local rows of the P1 space).
+
+    ``boundary`` are local vertex rows (owned and ghost) on the boundary, ``normals``
+    their unit normals (nb, 2); ``weights`` the lumped-mass weight of every local
+    row; ``owned`` the number of owned rows; ``isotropic`` whether l1 = l2 everywhere.
+    """
+
+    boundary: np.ndarray
+    normals: np.ndarray
+    weights: np.ndarray
+    owned: int
+    isotropic: bool
+    comm: MPI.Comm
+
+    @property
+    def interior(self) -> np.ndarray:
+        mask = np.ones(self.weights.size, dtype=bool)
+        mask[self.boundary] = False
+        return np.flatnonzero(mask)
+
+
+def _vertex_rows_of_facets(V, facets):
+    """Local P1 rows (vertex dofs) of the two vertices of each facet, shape (nf, 2)."""
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
+    c_to_f = mesh.topology.connectivity(tdim, tdim - 1)
+    dofmap = V.dofmap.list
+    rows = np.empty((facets.size, 2), dtype=np.int32)
+    # Local facet i of a triangle is opposite local vertex i: its dofs are the other two.
+    for n, f in enumerate(facets):
+        cell = f_to_c.links(f)[0]
+        local = int(np.flatnonzero(c_to_f.links(cell) == f)[0])
+        rows[n] = np.delete(dofmap[cell], local)
+    return rows
+
+
+def frame_constraints(V, isotropic: bool = False) -> FrameConstraints:
+    """Boundary rows, their normals and lumped-mass weights for the frame space ``V``."""
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    mesh.topology.create_connectivity(tdim, tdim - 1)
+    facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    rows = _vertex_rows_of_facets(V, facets)
+    x = V.tabulate_dof_coordinates()[:, :2]
+    edge = x[rows[:, 1]] - x[rows[:, 0]]
+    angle4 = 4 * np.arctan2(edge[:, 0], -edge[:, 1])  # normal (e_y, -e_x) up to sign
+    length = np.linalg.norm(edge, axis=1)
+
+    # Accumulate length-weighted e^{4iψ} at the vertices, summed across ranks.
+    index_map = V.dofmap.index_map
+    acc = dolfinx.la.vector(index_map, 2)
+    values = acc.array.reshape(-1, 2)
+    for k in range(2):
+        np.add.at(values[:, 0], rows[:, k], length * np.cos(angle4))
+        np.add.at(values[:, 1], rows[:, k], length * np.sin(angle4))
+    marker = dolfinx.la.vector(index_map, 1)
+    np.add.at(marker.array, rows.ravel(), 1.0)
+    for vec in (acc, marker):
+        vec.scatter_reverse(dolfinx.la.InsertMode.add)
+        vec.scatter_forward()
+    boundary = np.flatnonzero(marker.array > 0).astype(np.int32)
+    c, s = values[boundary, 0], values[boundary, 1]
+    psi = np.arctan2(s, c) / 4
+    normals = np.stack([np.cos(psi), np.sin(psi)], axis=1)
+
+    # Lumped mass ∫ φ_v dx of every vertex, read off the first component of the blocked space.
+    ones = ufl.as_vector([1.0, 0.0, 0.0, 0.0, 0.0])
+    lumped = fem.assemble_vector(fem.form(ufl.inner(ones, ufl.TestFunction(V)) * ufl.dx))
+    lumped.scatter_reverse(dolfinx.la.InsertMode.add)
+    lumped.scatter_forward()
+    return FrameConstraints(
+        boundary=boundary,
+        normals=normals,
+        weights=lumped.array.reshape(-1, 5)[:, 0].copy(),
+        owned=index_map.size_local,
+        isotropic=isotropic,
+        comm=mesh.comm,
+    )
+
+
+def project_rows(q: np.ndarray, constraints: FrameConstraints) -> np.ndarray:
+    """Step 4 of note §3: Odeco projection inside, orientation-fixed projection on ∂Ω."""
+    out = np.empty_like(q)
+    interior = constraints.interior
+    out[interior] = odeco.project(q[interior], isotropic=constraints.isotropic)
+    b = constraints.boundary
+    out[b] = odeco.project_aligned(q[b], constraints.normals, isotropic=constraints.isotropic)
+    return out
+
+
+def tangent_basis_rows(q: np.ndarray, constraints: FrameConstraints) -> np.ndarray:
+    """Orthonormal tangent basis (N, 5, 3) of the constraint set at q (zero columns: no dof).
+
+    Interior: 3 dofs (total length e_s, length difference e_d, rotation); isotropic:
+    e_s and rotation. Boundary: orientation fixed, so e_s and e_d (isotropic: e_s).
+    """
+    basis = odeco.tangent_basis(q)
+    b = constraints.boundary
+    if b.size:
+        c1, s1 = constraints.normals.T
+        c2, s2 = c1 * c1 - s1 * s1, 2 * s1 * c1
+        c4, s4 = c2 * c2 - s2 * s2, 2 * s2 * c2
+        basis[b] = 0.0
+        basis[b, 0, 0] = 3 * odeco.SQRT2 / 8
+        basis[b, 3, 0], basis[b, 4, 0] = c4 / 8, s4 / 8
+        basis[b, :, 0] /= np.sqrt(19 / 64)
+        basis[b, 1, 1], basis[b, 2, 1] = c2, s2
+    if constraints.isotropic:
+        basis[:, :, 1] = 0.0
+    return basis
+
+
+def tangent_project_rows(q: np.ndarray, dq: np.ndarray, constraints: FrameConstraints):
+    """Step 2 of note §3: the part of ``dq`` tangent to the constraint set at q (on it)."""
+    basis = tangent_basis_rows(q, constraints)
+    return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
+
+
+def weighted_norm2(q: np.ndarray, constraints: FrameConstraints) -> float:
+    """Σ_v m_v |q_v|² over owned vertices (lumped L² norm squared), summed over ranks."""
+    n = constraints.owned
+    local = float(np.dot(constraints.weights[:n], np.einsum("ni,ni->n", q[:n], q[:n])))
+    return constraints.comm.allreduce(local, op=MPI.SUM)
+
+
+def normalise_rows(q: np.ndarray, constraints: FrameConstraints, norm2: float) -> np.ndarray:
+    """Step 5 of note §3: scale q uniformly so that its lumped L² norm squared is ``norm2``."""
+    return q * np.sqrt(norm2 / weighted_norm2(q, constraints))
