@@ -1,0 +1,247 @@
+r"""Minimise the integrability energy over frame fields with PETSc TAO (note §3).
+
+The note's loop — (1) gradient step, (2) projection of the step on the tangent
+space, (3) update, (4) Odeco projection (orientation fixed on the boundary),
+(5) uniform normalisation — is a Riemannian gradient descent on the set
+
+    𝓜 = { q : q_v on the Odeco variety (isotropic: l1 = l2) at every vertex v,
+              aligned with the normal at boundary vertices,  Σ_v m_v |q_v|² = const }
+
+with steps 4–5 as the retraction R. Here TAO runs it:
+
+* the unknowns are x_v = √m_v q_v (m_v the lumped mass of vertex v), so the Euclidean
+  inner product TAO uses is the lumped L² product of the field and step sizes and
+  tolerances do not depend on the mesh; the pointwise projection commutes with the
+  scaling (the variety is a cone) and the normalisation becomes |x| = const;
+* the objective at x is H(R(x)), assembled by DOLFINx from the UFL form;
+* the gradient is the Riemannian gradient at R(x): the assembled dH/dq, scaled by
+  1/√m_v, projected pointwise on the tangent space (step 2) and orthogonally to x
+  (the tangent of the normalisation sphere);
+* TAO's update hook retracts the iterate, x ← R(x), at the start of every iteration,
+  so every iterate lies on 𝓜 and its gradient is exact.
+
+TAO supplies the search direction (``-tao_type``: ``bncg`` with ``-tao_bncg_type gd`` is
+the note's steepest descent, the default here; ``lmvm``, other ``bncg`` variants ...),
+the line search (``-tao_ls_type``) and the stopping tests (``-tao_gatol``,
+``-tao_grtol``, ``-tao_max_it``). Every option can be given on the command line,
+under ``options_prefix`` (default none): defaults below are set only where the user
+gave no value, and ``setFromOptions`` comes last.
+"""
+
+import time
+from dataclasses import dataclass, field
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
+
+import dolfinx  # noqa: E402
+import dolfinx.fem as fem  # noqa: E402
+import dolfinx.fem.petsc  # noqa: E402, F401
+
+from ufl_frames import energy, projection  # noqa: E402
+
+#: TAO defaults of the note's projected gradient method (overridable from the command line).
+DEFAULT_OPTIONS = {
+    "tao_type": "bncg",
+    "tao_bncg_type": "gd",
+    "tao_ls_type": "armijo",
+    "tao_gatol": 1e-10,
+    "tao_grtol": 1e-7,
+}
+
+_REASONS = {
+    getattr(PETSc.TAO.ConvergedReason, name): name
+    for name in dir(PETSc.TAO.ConvergedReason)
+    if name.isupper() or name.startswith(("CONVERGED", "DIVERGED", "CONTINUE"))
+}
+
+
+def converged_reason_name(reason: int) -> str:
+    """TAO's converged reason as text (e.g. ``CONVERGED_GRTOL``)."""
+    return _REASONS.get(reason, str(reason))
+
+
+@dataclass
+class FrameProblem:
+    """Everything assembled once for a frame field ``q``: compiled forms, constraints, work."""
+
+    q: fem.Function
+    constraints: projection.FrameConstraints
+    integrability: fem.Form
+    gradient: fem.Form
+    dirichlet: fem.Form
+    norm2: float
+    sqrt_mass: np.ndarray = field(repr=False)
+
+    @property
+    def rows(self) -> np.ndarray:
+        """Local rows (owned and ghost) of q, a (N, 5) view."""
+        return self.q.x.array.reshape(-1, 5)
+
+    @property
+    def owned(self) -> int:
+        return self.constraints.owned
+
+    def set_from_x(self, x: PETSc.Vec) -> None:
+        """q ← R(x / √m): unscale, fill ghosts, project pointwise, normalise (steps 4–5)."""
+        n = self.owned
+        self.rows[:n] = x.getArray(readonly=True).reshape(-1, 5) / self.sqrt_mass[:n, None]
+        self.q.x.scatter_forward()
+        self.retract()
+
+    def retract(self) -> None:
+        """Steps 4–5 of note §3 on q in place."""
+        rows = projection.project_rows(self.rows, self.constraints)
+        self.rows[:] = projection.normalise_rows(rows, self.constraints, self.norm2)
+
+    def write_x(self, x: PETSc.Vec) -> None:
+        """x ← √m q (owned rows)."""
+        n = self.owned
+        x.getArray()[:] = (self.rows[:n] * self.sqrt_mass[:n, None]).ravel()
+
+    def energy(self) -> float:
+        return self.q.function_space.mesh.comm.allreduce(
+            fem.assemble_scalar(self.integrability), op=MPI.SUM
+        )
+
+    def dirichlet_energy(self) -> float:
+        return self.q.function_space.mesh.comm.allreduce(
+            fem.assemble_scalar(self.dirichlet), op=MPI.SUM
+        )
+
+    def riemannian_gradient(self, g: PETSc.Vec) -> None:
+        """g ← the gradient of H on 𝓜 at q, in the scaled unknowns x (steps 1–2)."""
+        n = self.owned
+        b = fem.assemble_vector(self.gradient)
+        b.scatter_reverse(dolfinx.la.InsertMode.add)
+        # Ghost rows of b are partial sums: projected along (pointwise), then dropped.
+        dh = b.array.reshape(-1, 5) / self.sqrt_mass[:, None]
+        dh = projection.tangent_project_rows(self.rows, dh, self.constraints)[:n]
+        x = self.rows[:n] * self.sqrt_mass[:n, None]
+        comm = self.constraints.comm
+        along = comm.allreduce(float(np.vdot(dh, x)), op=MPI.SUM) / comm.allreduce(
+            float(np.vdot(x, x)), op=MPI.SUM
+        )
+        g.getArray()[:] = (dh - along * x).ravel()
+
+
+def frame_problem(q: fem.Function, isotropic: bool = False) -> FrameProblem:
+    """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
+
+    The normalisation (step 5) keeps the lumped L² norm of the retracted ``q``.
+    """
+    V = q.function_space
+    constraints = projection.frame_constraints(V, isotropic=isotropic)
+    H = energy.integrability_energy_form(q)
+    problem = FrameProblem(
+        q=q,
+        constraints=constraints,
+        integrability=fem.form(H),
+        gradient=fem.form(energy.gradient_form(H, q)),
+        dirichlet=fem.form(energy.dirichlet_energy_form(q)),
+        norm2=1.0,
+        sqrt_mass=np.sqrt(constraints.weights),
+    )
+    q.x.array[:] = projection.project_rows(problem.rows, constraints).ravel()
+    problem.norm2 = projection.weighted_norm2(problem.rows, constraints)
+    return problem
+
+
+@dataclass
+class SolveResult:
+    """Outcome of :func:`solve`: the history has one entry per iteration (0 = initial)."""
+
+    history: list[dict]
+    converged_reason: str
+    iterations: int
+    wall_time_s: float
+
+    @property
+    def H_initial(self) -> float:
+        return self.history[0]["H"]
+
+    @property
+    def H_final(self) -> float:
+        return self.history[-1]["H"]
+
+    @property
+    def E_final(self) -> float:
+        return self.history[-1]["E"]
+
+
+def _set_default_options(prefix: str, defaults: dict) -> None:
+    opts = PETSc.Options(prefix)
+    for key, value in defaults.items():
+        if not opts.hasName(key):
+            opts[key] = value
+
+
+def solve(
+    problem: FrameProblem,
+    max_it: int | None = None,
+    options_prefix: str = "",
+    defaults: dict | None = None,
+    monitor=None,
+) -> SolveResult:
+    """Minimise H over 𝓜 from ``problem.q`` with TAO; ``problem.q`` holds the result.
+
+    ``max_it`` is a default for ``-tao_max_it`` (the command line wins). ``monitor``
+    receives each history entry ``{"it", "H", "E", "gnorm", "step"}`` (on every rank).
+    """
+    comm = problem.constraints.comm
+    _set_default_options(options_prefix, {**DEFAULT_OPTIONS, **(defaults or {})})
+    if max_it is not None:
+        _set_default_options(options_prefix, {"tao_max_it": max_it})
+
+    V = problem.q.function_space
+    x = dolfinx.fem.petsc.create_vector(V)
+    problem.retract()
+    problem.write_x(x)
+    g = x.duplicate()
+
+    def objective_gradient(tao, x, g):
+        problem.set_from_x(x)
+        problem.riemannian_gradient(g)
+        return problem.energy()
+
+    def update(tao, it):
+        problem.set_from_x(tao.getSolution())
+        problem.write_x(tao.getSolution())
+
+    history = []
+
+    def record(tao):
+        it, f, gnorm, _, step, _ = tao.getSolutionStatus()
+        problem.set_from_x(tao.getSolution())
+        entry = {"it": int(it), "H": float(f), "E": problem.dirichlet_energy(),
+                 "gnorm": float(gnorm), "step": float(step)}
+        if history and history[-1]["it"] == entry["it"]:
+            history.pop()  # some TAO types report iteration 0 twice (restart)
+        history.append(entry)
+        if monitor is not None:
+            monitor(entry)
+
+    tao = PETSc.TAO().create(comm)
+    tao.setOptionsPrefix(options_prefix)
+    tao.setSolution(x)
+    tao.setObjectiveGradient(objective_gradient, g)
+    tao.setUpdate(update)
+    tao.setMonitor(record)
+    tao.setFromOptions()
+
+    start = time.perf_counter()
+    tao.solve()
+    wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    problem.set_from_x(tao.getSolution())
+    reason = converged_reason_name(tao.getConvergedReason())
+    iterations = tao.getIterationNumber()
+    tao.destroy()
+    x.destroy()
+    g.destroy()
+    return SolveResult(history=history, converged_reason=reason, iterations=iterations,
+                       wall_time_s=wall)
