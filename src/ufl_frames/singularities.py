@@ -1,0 +1,113 @@
+r"""Singularities of a cross field given by Odeco coefficients at the vertices of triangles.
+
+The cross direction is read from :math:`C = q_3 + i q_4 = (s/8) e^{4it}` (see
+:mod:`ufl_frames.odeco`): :math:`\theta_4 = \arg C = 4t`, which is continuous across
+the fourfold symmetry of a cross. The index of a triangle is the winding of
+:math:`\theta_4` around its boundary divided by 4:
+
+.. math::  I = \frac{1}{8\pi} \sum_{\text{edges } ij} w(\theta_{4,j} - \theta_{4,i}),
+           \qquad w(\delta) \in (-\pi, \pi],
+
+counted counter-clockwise, so a multiple of 1/4: a +1/4 singularity is one where
+the cross turns by +90° around a small loop. The sum over all triangles equals the
+winding of θ₄ along the mesh boundary (a discrete index theorem).
+
+:func:`triangle_indices` and :func:`find_singularities` are pure NumPy;
+:func:`locate_singularities` works on a DOLFINx function and imports DOLFINx only
+when called.
+"""
+
+import numpy as np
+
+__all__ = ["find_singularities", "locate_singularities", "triangle_indices"]
+
+
+def _wrap(delta: np.ndarray) -> np.ndarray:
+    """Angle differences wrapped into (−π, π]."""
+    return np.pi - np.mod(np.pi - delta, 2 * np.pi)
+
+
+def _check(cells, q, coords=None):
+    cells = np.asarray(cells)
+    if cells.ndim != 2 or cells.shape[1] != 3:
+        raise ValueError(f"cells must have shape (M, 3), got {cells.shape}")
+    if cells.size and not np.issubdtype(cells.dtype, np.integer):
+        raise ValueError(f"cells must hold integer vertex indices, got dtype {cells.dtype}")
+    q = np.asarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 5:
+        raise ValueError(f"q must have shape (N, 5), got {q.shape}")
+    if cells.size and (cells.min() < 0 or cells.max() >= q.shape[0]):
+        raise ValueError(f"cells index vertices outside 0..{q.shape[0] - 1}")
+    if not np.all(np.isfinite(q[:, 3:5])):
+        raise ValueError("q has NaN or Inf in its C = (q3, q4) components")
+    if coords is not None:
+        coords = np.asarray(coords, dtype=np.float64)
+        if coords.ndim != 2 or coords.shape[0] != q.shape[0] or coords.shape[1] < 2:
+            raise ValueError(f"coords must have shape ({q.shape[0]}, 2 or 3), got {coords.shape}")
+    return cells.astype(np.int64, copy=False), q, coords
+
+
+def triangle_indices(cells, q, coords=None) -> np.ndarray:
+    """Index (a multiple of 1/4) of every triangle, shape (M,).
+
+    ``cells`` (M, 3) holds vertex indices into ``q`` (N, 5). Triangles are taken as
+    counter-clockwise; pass ``coords`` (N, 2 or 3) to orient each one by its signed
+    area instead (DOLFINx cells have no fixed orientation).
+    """
+    cells, q, coords = _check(cells, q, coords)
+    theta4 = np.arctan2(q[:, 4], q[:, 3])
+    t = theta4[cells]  # (M, 3)
+    steps = _wrap(t[:, [1, 2, 0]] - t)  # edges 0→1, 1→2, 2→0
+    turns = np.rint(steps.sum(axis=1) / (2 * np.pi))  # an integer up to rounding
+    if coords is not None:
+        x = coords[cells, :2]
+        e1, e2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
+        area2 = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        turns = np.where(area2 < 0, -turns, turns)
+    return turns / 4.0 + 0.0  # + 0.0 turns −0.0 into 0.0
+
+
+def find_singularities(cells, coords, q) -> list[dict]:
+    """Triangles of nonzero index as ``{"index", "x", "y"}`` (barycentres), sorted by (x, y)."""
+    cells, q, coords = _check(cells, q, coords)
+    if coords is None:
+        raise ValueError("coords are required")
+    index = triangle_indices(cells, q, coords)
+    hit = np.flatnonzero(index != 0)
+    centre = coords[cells[hit], :2].mean(axis=1)
+    found = [
+        {"index": float(index[k]), "x": float(c[0]), "y": float(c[1])}
+        for k, c in zip(hit, centre, strict=True)
+    ]
+    return sorted(found, key=lambda s: (s["x"], s["y"], s["index"]))
+
+
+def locate_singularities(q_function) -> list[dict]:
+    """:func:`find_singularities` for a DOLFINx P1 function with value shape (5,).
+
+    Collective: each rank scans the cells it owns, and every rank returns the same
+    list of all singularities, sorted by (x, y). Updates the ghost values of
+    ``q_function`` (``scatter_forward``) first.
+    """
+    from ufl_frames.bootstrap import init_petsc
+
+    init_petsc()
+    import dolfinx  # noqa: F401  (only to fail early and clearly without DOLFINx)
+
+    V = q_function.function_space
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    bs = V.dofmap.index_map_bs
+    cell_dofs = V.dofmap.list
+    if tdim != 2 or bs != 5 or cell_dofs.shape[1] != 3:
+        raise ValueError(
+            "locate_singularities needs a P1 function with value shape (5,) on a triangle "
+            f"mesh; got tdim={tdim}, block size={bs}, {cell_dofs.shape[1]} dofs per cell"
+        )
+    q_function.x.scatter_forward()
+    q = q_function.x.array.reshape(-1, bs)
+    coords = V.tabulate_dof_coordinates()
+    owned = mesh.topology.index_map(tdim).size_local
+    local = find_singularities(cell_dofs[:owned], coords[: q.shape[0]], q)
+    found = [s for part in mesh.comm.allgather(local) for s in part]
+    return sorted(found, key=lambda s: (s["x"], s["y"], s["index"]))

@@ -1,0 +1,223 @@
+"""Triangle indices of cross fields (ufl_frames.singularities), NumPy and DOLFINx sides."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ufl_frames.singularities import find_singularities, locate_singularities, triangle_indices
+
+
+def q_from_theta4(theta4, s=2.0):
+    """Isotropic Odeco coefficients whose cross angle is theta4 / 4 (odeco module docstring)."""
+    theta4 = np.asarray(theta4, dtype=float)
+    q = np.zeros((theta4.size, 5))
+    q[:, 0] = 3 * np.sqrt(2) * s / 8
+    q[:, 3] = s / 8 * np.cos(theta4)
+    q[:, 4] = s / 8 * np.sin(theta4)
+    return q
+
+
+def grid(n=12, jitter=0.0, seed=0):
+    """Triangulated [0, 1]^2 (counter-clockwise cells), optionally with moved interior nodes."""
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
+    coords = np.stack([x.ravel(), y.ravel()], axis=1)
+    if jitter:
+        interior = (coords > 0).all(axis=1) & (coords < 1).all(axis=1)
+        rng = np.random.default_rng(seed)
+        coords[interior] += jitter / n * rng.uniform(-1, 1, size=(interior.sum(), 2))
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    cells = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return cells, coords
+
+
+def vortex(coords, centres):
+    """theta4 = sum_k k * atan2(y - y0, x - x0): a k/4 singularity at each (x0, y0, k)."""
+    theta4 = np.zeros(coords.shape[0])
+    for x0, y0, k in centres:
+        theta4 += k * np.arctan2(coords[:, 1] - y0, coords[:, 0] - x0)
+    return theta4
+
+
+# --- NumPy side -------------------------------------------------------------------
+
+
+def test_single_triangle_winding_and_wrapping():
+    cells = np.array([[0, 1, 2]])
+    # theta4 going once around: steps of 2π/3 each, all inside (−π, π].
+    q = q_from_theta4([0.0, 2 * np.pi / 3, 4 * np.pi / 3])
+    assert triangle_indices(cells, q).tolist() == [0.25]
+    assert triangle_indices(cells[:, ::-1], q).tolist() == [-0.25]
+    # Same angles shifted by 2π multiples: arg() only sees them modulo 2π.
+    q2 = q_from_theta4([10 * np.pi, 2 * np.pi / 3 - 4 * np.pi, 4 * np.pi / 3 + 2 * np.pi])
+    assert triangle_indices(cells, q2).tolist() == [0.25]
+    # Back and forth: no winding. The jump 3 -> -3 is read the short way (+2π - 6).
+    assert triangle_indices(cells, q_from_theta4([0.0, 1.0, -1.0])).tolist() == [0.0]
+    assert triangle_indices(cells, q_from_theta4([0.0, 3.0, -3.0])).tolist() == [0.25]
+
+
+def test_orientation_from_coords():
+    cells, coords = grid(6)
+    theta4 = vortex(coords, [(0.43, 0.61, 1)])
+    q = q_from_theta4(theta4)
+    ccw = triangle_indices(cells, q, coords)
+    flipped = cells[:, [0, 2, 1]]
+    assert np.array_equal(triangle_indices(flipped, q, coords), ccw)
+    assert np.array_equal(triangle_indices(flipped, q), -ccw)
+    assert np.array_equal(triangle_indices(cells, q), ccw)
+
+
+@pytest.mark.parametrize("k", [1, -1])
+@pytest.mark.parametrize("jitter", [0.0, 0.3])
+def test_one_vortex(k, jitter):
+    cells, coords = grid(12, jitter=jitter)
+    x0, y0 = 0.437, 0.582
+    q = q_from_theta4(vortex(coords, [(x0, y0, k)]))
+    found = find_singularities(cells, coords, q)
+    assert len(found) == 1
+    (s,) = found
+    assert s["index"] == k / 4
+    assert np.hypot(s["x"] - x0, s["y"] - y0) < 1.0 / 12
+    assert set(s) == {"index", "x", "y"}
+    assert all(type(v) is float for v in s.values())
+
+
+def test_pair_and_sorting():
+    cells, coords = grid(16)
+    q = q_from_theta4(vortex(coords, [(0.717, 0.463, -1), (0.291, 0.538, 1)]))
+    found = find_singularities(cells, coords, q)
+    assert [s["index"] for s in found] == [0.25, -0.25]
+    assert found[0]["x"] < 0.5 < found[1]["x"]
+
+
+def test_double_vortex_total_index():
+    # A ±1/2 vortex spreads over neighbouring triangles (an edge may see a jump > π),
+    # but the total is exact.
+    cells, coords = grid(16)
+    for k in (2, -2):
+        q = q_from_theta4(vortex(coords, [(0.517, 0.493, k)]))
+        index = triangle_indices(cells, q, coords)
+        assert index.sum() == k / 4
+        assert np.all(np.abs(index) <= 0.5)
+
+
+def test_smooth_field_has_none():
+    cells, coords = grid(10, jitter=0.3)
+    theta4 = 2.0 * coords[:, 0] - 1.3 * coords[:, 1] + 0.4 * np.sin(3 * coords[:, 0])
+    q = q_from_theta4(theta4)
+    assert find_singularities(cells, coords, q) == []
+    assert np.all(triangle_indices(cells, q, coords) == 0.0)
+    # −0.0 is not returned
+    assert not np.any(np.signbit(triangle_indices(cells, q, coords)))
+
+
+def test_discrete_index_theorem():
+    """Sum of triangle indices = winding of theta4 along the boundary / (8π)."""
+    cells, coords = grid(10, jitter=0.3, seed=3)
+    rng = np.random.default_rng(1)
+    centres = [(*rng.uniform(0.1, 0.9, 2), k) for k in (1, 1, -1, 1)]
+    q = q_from_theta4(vortex(coords, centres))
+    theta4 = np.arctan2(q[:, 4], q[:, 3])
+    n = 10
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    loop = np.concatenate([idx[:, 0], idx[-1, 1:], idx[-2::-1, -1], idx[0, -2:0:-1]])
+    steps = np.diff(theta4[np.append(loop, loop[0])])
+    winding = np.sum(np.pi - np.mod(np.pi - steps, 2 * np.pi)) / (8 * np.pi)
+    assert triangle_indices(cells, q, coords).sum() == pytest.approx(winding)
+    assert winding == pytest.approx(0.5)
+
+
+def test_input_checks():
+    cells, coords = grid(2)
+    q = q_from_theta4(np.zeros(coords.shape[0]))
+    with pytest.raises(ValueError, match="cells"):
+        triangle_indices(cells[:, :2], q)
+    with pytest.raises(ValueError, match="q must have shape"):
+        triangle_indices(cells, q[:, :4])
+    with pytest.raises(ValueError, match="outside"):
+        triangle_indices(cells + 100, q)
+    with pytest.raises(ValueError, match="integer"):
+        triangle_indices(cells.astype(float), q)
+    bad = q.copy()
+    bad[0, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        triangle_indices(cells, bad)
+    with pytest.raises(ValueError, match="coords"):
+        find_singularities(cells, coords[:-1], q)
+    assert triangle_indices(np.zeros((0, 3), dtype=int), q).shape == (0,)
+
+
+@pytest.mark.serial
+def test_module_imports_without_dolfinx():
+    code = (
+        "import sys, ufl_frames.singularities; "
+        "assert 'dolfinx' not in sys.modules, 'dolfinx imported'; "
+        "assert 'petsc4py' not in sys.modules, 'petsc4py imported'"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+# --- DOLFINx side -----------------------------------------------------------------
+
+
+def _dolfinx():
+    from ufl_frames.bootstrap import init_petsc
+
+    init_petsc([])  # not pytest's command line
+    from mpi4py import MPI
+
+    import dolfinx
+
+    return MPI, dolfinx
+
+
+def _p1_frames(mesh, theta4_of_x):
+    _, dolfinx = _dolfinx()
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (5,)))
+    q = dolfinx.fem.Function(V)
+    q.interpolate(lambda x: q_from_theta4(theta4_of_x(x)).T)
+    return q
+
+
+def _same_on_all_ranks(comm, found):
+    everyone = comm.allgather(found)
+    assert all(other == everyone[0] for other in everyone)
+
+
+def test_locate_synthetic_pair():
+    MPI, dolfinx = _dolfinx()
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_rectangle(
+        comm, [[0.0, 0.0], [2.0, 1.0]], [24, 12], dolfinx.mesh.CellType.triangle
+    )
+    plus, minus = (0.537, 0.412), (1.461, 0.583)
+
+    def theta4(x):
+        return np.arctan2(x[1] - plus[1], x[0] - plus[0]) - np.arctan2(
+            x[1] - minus[1], x[0] - minus[0]
+        )
+
+    found = locate_singularities(_p1_frames(mesh, theta4))
+    _same_on_all_ranks(comm, found)
+    assert [s["index"] for s in found] == [0.25, -0.25]
+    for s, (x0, y0) in zip(found, (plus, minus), strict=True):
+        assert np.hypot(s["x"] - x0, s["y"] - y0) < 2.0 / 12
+
+
+def test_locate_smooth_field_none():
+    MPI, dolfinx = _dolfinx()
+    comm = MPI.COMM_WORLD
+    mesh = dolfinx.mesh.create_unit_square(comm, 10, 10)
+    found = locate_singularities(_p1_frames(mesh, lambda x: 1.5 * x[0] - 2.0 * x[1]))
+    assert found == []
+
+
+def test_locate_rejects_scalar_space():
+    MPI, dolfinx = _dolfinx()
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 2, 2)
+    f = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("Lagrange", 1)))
+    with pytest.raises(ValueError, match="value shape"):
+        locate_singularities(f)
