@@ -1,0 +1,359 @@
+"""Meshes from ufl_frames.geometry: built-in shapes, user files, errors; serial and MPI."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc([])  # not pytest's command line
+
+import gmsh  # noqa: E402
+import ufl  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+import dolfinx  # noqa: E402
+import dolfinx.fem.petsc  # noqa: E402
+
+from ufl_frames import geometry  # noqa: E402
+from ufl_frames.geometry import GeometryError  # noqa: E402
+from ufl_frames.singularities import locate_singularities  # noqa: E402
+
+MESHES = Path(__file__).resolve().parents[1] / "meshes"
+COMM = MPI.COMM_WORLD
+H = 0.1  # coarse: the suite must stay fast
+
+
+def integrate(mesh, measure):
+    form = dolfinx.fem.form(dolfinx.fem.Constant(mesh, 1.0) * measure(domain=mesh))
+    return mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+
+
+def num_cells(mesh):
+    return mesh.topology.index_map(mesh.topology.dim).size_global
+
+
+def assert_p1_triangles_2d(mesh):
+    assert mesh.geometry.dim == 2
+    assert mesh.topology.dim == 2
+    assert mesh.topology.cell_type == dolfinx.mesh.CellType.triangle
+    assert mesh.geometry.cmaps[0].degree == 1
+    assert num_cells(mesh) > 0
+
+
+# --- built-in shapes --------------------------------------------------------------
+
+
+def test_annulus_area_and_boundary():
+    mesh = geometry.annulus(COMM, H)
+    assert_p1_triangles_2d(mesh)
+    # Inscribed polygons: both errors are O(h²) and negative.
+    assert integrate(mesh, ufl.dx) == pytest.approx(3 * math.pi / 4, rel=2e-3)
+    assert integrate(mesh, ufl.ds) == pytest.approx(3 * math.pi, rel=2e-3)
+    r = np.linalg.norm(mesh.geometry.x[:, :2], axis=1)
+    assert r.min() >= 0.5 - 1e-12 and r.max() <= 1.0 + 1e-12
+
+
+def test_annulus_custom_radii():
+    mesh = geometry.annulus(COMM, 0.2, r_inner=1.0, r_outer=2.0)
+    assert integrate(mesh, ufl.dx) == pytest.approx(3 * math.pi, rel=5e-3)
+    with pytest.raises(GeometryError, match="r_inner must be smaller"):
+        geometry.annulus(COMM, 0.2, r_inner=1.0, r_outer=0.5)
+    with pytest.raises(GeometryError, match="r_inner"):
+        geometry.annulus(COMM, 0.2, r_inner=-1.0)
+
+
+def test_piano_area_and_boundary():
+    mesh = geometry.piano(COMM, H)
+    assert_p1_triangles_2d(mesh)
+    assert integrate(mesh, ufl.dx) == pytest.approx(geometry.piano_area(), rel=2e-3)
+    assert integrate(mesh, ufl.ds) == pytest.approx(geometry.piano_perimeter(), rel=2e-3)
+    x = mesh.comm.allgather(mesh.geometry.x[:, :2])
+    x = np.concatenate(x)
+    assert np.allclose(x.min(axis=0), [0, 0]) and np.allclose(x.max(axis=0), [2, 1.2])
+
+
+def test_mesh_size_refines():
+    coarse, fine = geometry.piano(COMM, 0.2), geometry.piano(COMM, 0.1)
+    assert 3 < num_cells(fine) / num_cells(coarse) < 5
+
+
+@pytest.mark.parametrize("name", ["annulus", "piano"])
+def test_geo_sources_match_builders(name):
+    built = geometry.build(COMM, name, H)
+    loaded = geometry.load(COMM, MESHES / f"{name}.geo", H)
+    assert num_cells(loaded) == num_cells(built)
+    assert integrate(loaded, ufl.dx) == pytest.approx(integrate(built, ufl.dx), rel=1e-12)
+    assert integrate(loaded, ufl.ds) == pytest.approx(integrate(built, ufl.ds), rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["annulus", "piano"])
+def test_distributed_mesh_has_all_cells(name):
+    """Built on rank 0 and distributed: same global cells as a mesh built on each rank alone."""
+    whole = geometry.build(COMM, name, H)
+    alone = geometry.build(MPI.COMM_SELF, name, H)
+    assert num_cells(whole) == num_cells(alone)
+    local = whole.topology.index_map(2).size_local
+    assert COMM.allreduce(local, op=MPI.SUM) == num_cells(alone)
+    if COMM.size > 1:
+        assert min(COMM.allgather(local)) > 0
+
+
+def test_quiet_by_default(capfd, monkeypatch):
+    monkeypatch.delenv("UFL_FRAMES_GMSH_VERBOSE", raising=False)
+    geometry.piano(COMM, 0.3)
+    out, err = capfd.readouterr()
+    assert "Info" not in out + err
+
+
+# --- the piano's cross field ------------------------------------------------------
+
+
+def harmonic_cross_field(mesh):
+    """Boundary-aligned cross field: z = e^{4iψ} (ψ the boundary normal angle) on the
+    boundary, harmonic inside; returned as isotropic Odeco coefficients with C ∝ z.
+
+    All straight sides of the piano are axis-parallel (z = 1); on the arcs z =
+    e^{4i·angle(x − centre)}, which is 1 at their ends, so z is continuous.
+    """
+    pts = geometry.piano_points()
+    arcs = [(pts[6], geometry.PIANO_CONCAVE_RADIUS), (pts[7], geometry.PIANO_CONVEX_RADIUS)]
+
+    def boundary_z(x):
+        z = np.ones(x.shape[1], dtype=complex)
+        for (cx, cy), r in arcs:
+            dx, dy = x[0] - cx, x[1] - cy
+            on_arc = np.abs(np.hypot(dx, dy) - r) < 1e-8
+            z[on_arc] = np.exp(4j * np.arctan2(dy[on_arc], dx[on_arc]))
+        return z
+
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+    mesh.topology.create_connectivity(1, 2)
+    facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    dofs = dolfinx.fem.locate_dofs_topological(V, 1, facets)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    a = ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx
+    L = dolfinx.fem.Constant(mesh, 0.0) * v * ufl.dx
+    parts = []
+    for name, part in (("re", np.real), ("im", np.imag)):
+        g = dolfinx.fem.Function(V)
+        g.interpolate(lambda x, part=part: part(boundary_z(x)))
+        problem = dolfinx.fem.petsc.LinearProblem(
+            a,
+            L,
+            bcs=[dolfinx.fem.dirichletbc(g, dofs)],
+            petsc_options_prefix=f"test_piano_{name}_",
+            petsc_options={"ksp_type": "preonly", "pc_type": "lu"},
+        )
+        parts.append(problem.solve())
+    re, im = parts
+    W = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (5,)))
+    q = dolfinx.fem.Function(W)
+    zero = 0.0 * re
+    values = ufl.as_vector([0.75 * math.sqrt(2) + zero, zero, zero, 0.25 * re, 0.25 * im])
+    q.interpolate(dolfinx.fem.Expression(values, W.element.interpolation_points))
+    return q
+
+
+@pytest.mark.parametrize("h", [0.1, 0.05])
+def test_piano_has_plus_left_and_minus_right(h):
+    found = locate_singularities(harmonic_cross_field(geometry.piano(COMM, h)))
+    assert [s["index"] for s in found] == [0.25, -0.25], found
+    plus, minus = found
+    assert plus["x"] < 0.7 and minus["x"] > 1.3
+    assert np.hypot(plus["x"] - 0.41, plus["y"] - 0.79) < 0.1
+    assert np.hypot(minus["x"] - 1.43, minus["y"] - 0.63) < 0.1
+
+
+def test_annulus_has_no_singularity():
+    mesh = geometry.annulus(COMM, 0.15)
+    W = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (5,)))
+    q = dolfinx.fem.Function(W)
+    # Cross aligned with e_r: 4t = 4 * polar angle.
+    q.interpolate(
+        lambda x: np.vstack(
+            [
+                np.full(x.shape[1], 0.75 * math.sqrt(2)),
+                0 * x[0],
+                0 * x[0],
+                0.25 * np.cos(4 * np.arctan2(x[1], x[0])),
+                0.25 * np.sin(4 * np.arctan2(x[1], x[0])),
+            ]
+        )
+    )
+    assert locate_singularities(q) == []
+
+
+# --- user files -------------------------------------------------------------------
+
+
+def write_rectangle(tmp_path, suffix, width=2.0, height=1.0):
+    """A width × height rectangle written by Gmsh (every rank writes its own copy)."""
+    path = tmp_path / f"rect{suffix}"
+    if suffix == ".geo":
+        path.write_text(
+            'SetFactory("OpenCASCADE");\n'
+            f"Rectangle(1) = {{0, 0, 0, {width}, {height}}};\n"
+            "Mesh.MeshSizeMax = 1.0;\n"  # overridden by load()'s mesh_size
+        )
+        return path
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.occ.addRectangle(0, 0, 0, width, height)
+        gmsh.model.occ.synchronize()
+        if suffix == ".msh":
+            gmsh.option.setNumber("Mesh.MeshSizeMax", 0.25)
+            gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".geo", ".msh", ".brep", ".step", ".stp"])
+def test_load_user_rectangle(tmp_path, suffix):
+    if suffix == ".stp":
+        path = write_rectangle(tmp_path, ".step").rename(tmp_path / "rect.stp")
+    else:
+        path = write_rectangle(tmp_path, suffix)
+    mesh = geometry.load(COMM, path, mesh_size=0.25)
+    assert_p1_triangles_2d(mesh)
+    assert integrate(mesh, ufl.dx) == pytest.approx(2.0, rel=1e-12)
+    assert integrate(mesh, ufl.ds) == pytest.approx(6.0, rel=1e-12)
+    # build() takes paths (str or Path) too; mesh_size matters except for .msh.
+    finer = geometry.build(COMM, str(path), mesh_size=0.125)
+    if suffix == ".msh":
+        assert num_cells(finer) == num_cells(mesh)
+    else:
+        assert num_cells(finer) > 2 * num_cells(mesh)
+
+
+def test_msh_without_physical_groups_and_second_order(tmp_path):
+    path = tmp_path / "p2.msh"
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.occ.addDisk(0, 0, 0, 1, 1)
+        gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.3)
+        gmsh.model.mesh.generate(2)
+        gmsh.model.mesh.setOrder(2)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    mesh = geometry.load(COMM, path)
+    assert_p1_triangles_2d(mesh)
+    assert integrate(mesh, ufl.dx) == pytest.approx(math.pi, rel=0.05)
+
+
+def test_caller_gmsh_session_is_kept():
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.model.add("mine")
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 7.0)
+        geometry.piano(COMM, 0.3)
+        with pytest.raises(GeometryError):
+            geometry.load(COMM, MESHES / "no-such-file.geo")
+        assert gmsh.isInitialized()
+        assert gmsh.model.getCurrent() == "mine"
+        assert gmsh.option.getNumber("Mesh.MeshSizeMax") == 7.0
+        assert gmsh.option.getNumber("General.AbortOnError") == 2
+    finally:
+        gmsh.finalize()
+
+
+# --- errors -----------------------------------------------------------------------
+
+
+def raises_one_line(match, call, *args, **kwargs):
+    with pytest.raises(GeometryError, match=match) as info:
+        call(*args, **kwargs)
+    message = str(info.value)
+    assert message and "\n" not in message
+    assert not gmsh.isInitialized(), "gmsh left initialised after an error"
+    return message
+
+
+def test_missing_file(tmp_path):
+    for suffix in (".geo", ".msh", ".step"):
+        raises_one_line("not found", geometry.load, COMM, tmp_path / f"none{suffix}")
+    raises_one_line("not found", geometry.build, COMM, str(tmp_path / "none.msh"))
+
+
+@pytest.mark.parametrize(
+    "suffix, content, match",
+    [
+        (".msh", b"this is not a mesh\n\x00\x01\x02", "not a Gmsh mesh"),
+        (".msh", b"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\ngarbage\n", "cannot read|no 2D"),
+        (".geo", b"this is not a script\nat all\n", "syntax error"),
+        (".step", b"ISO-10303-21;\ngarbage\n", "cannot read"),
+        (".brep", b"garbage\n", "cannot read"),
+    ],
+)
+def test_corrupt_file(tmp_path, suffix, content, match):
+    path = tmp_path / f"corrupt{suffix}"
+    path.write_bytes(content)
+    message = raises_one_line(match, geometry.load, COMM, path)
+    assert "corrupt" in message
+    # A failed parse must not break later ones (Gmsh keeps a broken lexer otherwise).
+    mesh = geometry.load(COMM, write_rectangle(tmp_path, ".geo"), mesh_size=0.5)
+    assert integrate(mesh, ufl.dx) == pytest.approx(2.0)
+
+
+def test_3d_mesh_rejected(tmp_path):
+    path = tmp_path / "box.msh"
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    raises_one_line("3D mesh.*tetrahedra", geometry.load, COMM, path)
+
+
+def test_volume_geometry_rejected(tmp_path):
+    path = tmp_path / "box.geo"
+    path.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 1, 1};\n')
+    raises_one_line("volumes", geometry.load, COMM, path)
+
+
+def test_non_planar_and_empty_rejected(tmp_path):
+    tilted = tmp_path / "tilted.geo"
+    tilted.write_text(
+        'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n'
+        "Rotate {{1, 0, 0}, {0, 0, 0}, 0.3} { Surface{1}; }\n"
+    )
+    raises_one_line("not planar", geometry.load, COMM, tilted)
+    empty = tmp_path / "points.geo"
+    empty.write_text("Point(1) = {0, 0, 0};\n")
+    raises_one_line("no 2D surface", geometry.load, COMM, empty)
+    quads = tmp_path / "quads.geo"
+    quads.write_text(
+        'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\nRecombine Surface{1};\n'
+    )
+    raises_one_line("quadrilateral", geometry.load, COMM, quads)
+
+
+def test_unknown_name_and_extension(tmp_path):
+    message = raises_one_line("unknown geometry 'violin'", geometry.build, COMM, "violin")
+    assert "annulus" in message and "piano" in message
+    text = tmp_path / "shape.txt"
+    text.write_text("hello")
+    raises_one_line("unsupported geometry file extension '.txt'", geometry.load, COMM, text)
+    raises_one_line("unsupported", geometry.build, COMM, text)
+
+
+@pytest.mark.parametrize("bad", [-0.1, 0.0, float("nan"), float("inf"), "0.1", None, True])
+def test_bad_mesh_size(bad):
+    raises_one_line("mesh_size must be a positive finite number", geometry.piano, COMM, bad)
+    raises_one_line("mesh_size", geometry.annulus, COMM, bad)
+    raises_one_line("mesh_size", geometry.build, COMM, "piano", bad)
+    raises_one_line("mesh_size", geometry.load, COMM, MESHES / "piano.geo", bad)
