@@ -41,9 +41,9 @@ def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
     """Diffusion times τ: √τ from diameter/4 halving down to the mean edge length h."""
     comm = mesh.comm
     x = mesh.geometry.x[:, :2]
-    lo = comm.allreduce(x.min(axis=0), op=MPI.MIN)
-    hi = comm.allreduce(x.max(axis=0), op=MPI.MAX)
-    diameter = float(np.linalg.norm(hi - lo))
+    lo = [comm.allreduce(float(v), op=MPI.MIN) for v in x.min(axis=0, initial=np.inf)]
+    hi = [comm.allreduce(float(v), op=MPI.MAX) for v in x.max(axis=0, initial=-np.inf)]
+    diameter = float(np.linalg.norm(np.subtract(hi, lo)))
     area = comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh))), op=MPI.SUM)
     cells = mesh.topology.index_map(2).size_global
     h = math.sqrt(4 * area / (math.sqrt(3) * cells))  # edge of an equilateral triangle

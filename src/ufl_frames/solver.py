@@ -42,16 +42,21 @@ from petsc4py import PETSc  # noqa: E402
 import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
 import dolfinx.fem.petsc  # noqa: E402, F401
+import ufl  # noqa: E402
 
 from ufl_frames import energy, projection  # noqa: E402
 
 #: TAO defaults of the note's projected gradient method (overridable from the command line).
 DEFAULT_OPTIONS = {
     "tao_type": "bncg",
-    "tao_bncg_type": "gd",
-    "tao_ls_type": "armijo",
     "tao_gatol": 1e-10,
     "tao_grtol": 1e-7,
+    "tao_max_funcs": 1_000_000,
+}
+
+#: Defaults that apply to one TAO type only.
+TYPE_OPTIONS = {
+    "bncg": {"tao_bncg_type": "gd", "tao_ls_type": "armijo"},
 }
 
 _REASONS = {
@@ -75,6 +80,7 @@ class FrameProblem:
     integrability: fem.Form
     gradient: fem.Form
     dirichlet: fem.Form
+    gauss_newton: fem.Form
     norm2: float
     sqrt_mass: np.ndarray = field(repr=False)
 
@@ -104,6 +110,18 @@ class FrameProblem:
         n = self.owned
         x.getArray()[:] = (self.rows[:n] * self.sqrt_mass[:n, None]).ravel()
 
+    def tangent_projectors(self) -> tuple[PETSc.Mat, PETSc.Mat]:
+        """Block-diagonal P (onto the tangent space of 𝓜 at q, sphere excepted) and I − P."""
+        n = self.owned
+        basis = projection.tangent_basis_rows(self.rows, self.constraints)[:n]
+        blocks = np.einsum("nik,njk->nij", basis, basis)
+        index_map = self.q.function_space.dofmap.index_map
+        comm = self.constraints.comm
+        return (
+            _block_diagonal(blocks, index_map, comm),
+            _block_diagonal(np.eye(5) - blocks, index_map, comm),
+        )
+
     def energy(self) -> float:
         return self.q.function_space.mesh.comm.allreduce(
             fem.assemble_scalar(self.integrability), op=MPI.SUM
@@ -130,6 +148,19 @@ class FrameProblem:
         g.getArray()[:] = (dh - along * x).ravel()
 
 
+def _block_diagonal(blocks: np.ndarray, index_map, comm) -> PETSc.Mat:
+    """PETSc AIJ matrix (block size 5) with the (n, 5, 5) ``blocks`` on the owned diagonal."""
+    n = blocks.shape[0]
+    first = index_map.local_range[0]
+    size = (5 * n, 5 * index_map.size_global)
+    cols = 5 * (first + np.arange(n))[:, None, None] + np.arange(5)[None, None, :]
+    indices = np.broadcast_to(cols, (n, 5, 5)).astype(PETSc.IntType).ravel()
+    indptr = np.arange(0, 25 * n + 1, 5, dtype=PETSc.IntType)
+    return PETSc.Mat().createAIJ(
+        size=(size, size), bsize=5, csr=(indptr, indices, blocks.ravel()), comm=comm
+    )
+
+
 def frame_problem(q: fem.Function, isotropic: bool = False) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
@@ -144,6 +175,7 @@ def frame_problem(q: fem.Function, isotropic: bool = False) -> FrameProblem:
         integrability=fem.form(H),
         gradient=fem.form(energy.gradient_form(H, q)),
         dirichlet=fem.form(energy.dirichlet_energy_form(q)),
+        gauss_newton=fem.form(energy.gauss_newton_form(q)),
         norm2=1.0,
         sqrt_mass=np.sqrt(constraints.weights),
     )
@@ -174,6 +206,106 @@ class SolveResult:
         return self.history[-1]["E"]
 
 
+#: TAO types that get the Gauss–Newton Hessian of :class:`GaussNewtonModel`.
+SECOND_ORDER_TYPES = {"nls", "ntr", "ntl", "bnls", "bntr", "bntl", "tron"}
+
+
+class GaussNewtonModel:
+    r"""Riemannian Gauss–Newton Hessian of H on 𝓜, with Sobolev (H¹) damping.
+
+    In the scaled unknowns x = W q (W = diag √m) at the current iterate:
+
+        B = S [ P W⁻¹ (JᵀJ + λ (K + M)) W⁻¹ P + μ (I − P) ] S + μ x̂ x̂ᵀ
+
+    * JᵀJ: the linearised bracket, assembled from :func:`energy.gauss_newton_form`;
+    * P: block-diagonal tangent projector of the Odeco constraints (per vertex);
+      the normal directions get μ, the mean tangent curvature, so that a Newton
+      step from a tangent gradient is tangent;
+    * S = I − x̂x̂ᵀ: tangent projector of the normalisation sphere |x| = const
+      (without it the model predicts decreases by shrinking the frames, which the
+      retraction undoes);
+    * λ (K + M): Levenberg–Marquardt damping in the H¹ metric. H has a large family
+      of minimisers (integrable fields are far from unique), so JᵀJ is singular;
+      an L² (identity) damping lets the steps excite rough null directions, an H¹
+      damping keeps them smooth. λ = λ₀ |g|/|g₀| · mean|q|² vanishes at convergence,
+      which keeps the local Gauss–Newton rate (``-frames_gn_damping λ₀``, default 1).
+
+    B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
+    is the preconditioning matrix, so ``-tao_nls_pc_type`` / ``-tao_ntr_pc_type``
+    (gamg, hypre, lu, ...) act on it.
+    """
+
+    def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0):
+        self.problem, self.damping = problem, damping
+        self.gauss_newton = dolfinx.fem.petsc.create_matrix(problem.gauss_newton)
+        self.unscale = template.duplicate()
+        self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], 5)
+        V = problem.q.function_space
+        u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+        sobolev = fem.form((ufl.inner(ufl.grad(u), ufl.grad(w)) + ufl.inner(u, w)) * ufl.dx)
+        self.sobolev = dolfinx.fem.petsc.assemble_matrix(sobolev)
+        self.sobolev.assemble()
+        self.sobolev.diagonalScale(self.unscale, self.unscale)
+        self.xhat, self.work = template.duplicate(), template.duplicate()
+        self.mu, self.shift_value, self.lam, self.gnorm0 = 1.0, 0.0, 0.0, None
+        self.assembled = self._assemble(None, gnorm=1.0)
+        self.shell = PETSc.Mat().createPython(self.assembled.getSizes(), comm=template.comm)
+        self.shell.setPythonContext(self)
+        self.shell.setUp()
+
+    def _assemble(self, result, gnorm):
+        problem, G = self.problem, self.gauss_newton
+        G.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(G, problem.gauss_newton)
+        G.assemble()
+        G.diagonalScale(self.unscale, self.unscale)
+        if self.gnorm0 is None:
+            self.gnorm0 = gnorm
+        n = problem.owned
+        scale = problem.constraints.comm.allreduce(
+            float(np.einsum("ni,ni->", problem.rows[:n], problem.rows[:n])), op=MPI.SUM
+        ) / problem.q.function_space.dofmap.index_map.size_global
+        self.lam = self.damping * min(1.0, gnorm / self.gnorm0) * scale
+        G.axpy(self.lam, self.sobolev, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        tangent, normal = problem.tangent_projectors()
+        if result is None:
+            result = G.PtAP(tangent)
+        else:
+            G.PtAP(tangent, result=result)
+        diagonal, dofs = result.getDiagonal(), tangent.getDiagonal()
+        self.mu = diagonal.sum() / max(dofs.sum(), 1.0)
+        result.axpy(self.mu, normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        for obj in (tangent, normal, diagonal, dofs):
+            obj.destroy()
+        problem.write_x(self.xhat)
+        self.xhat.normalize()
+        self.shift_value = 0.0
+        return result
+
+    def update(self, tao, x, H, P):
+        """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
+        self.problem.set_from_x(x)
+        self._assemble(self.assembled, gnorm=tao.getGradient()[0].norm())
+
+    # MatShell interface
+    def mult(self, mat, v, y):
+        along = self.xhat.dot(v)
+        self.work.waxpy(-along, self.xhat, v)
+        self.assembled.mult(self.work, y)
+        y.axpy(self.mu * along - self.xhat.dot(y), self.xhat)
+        if self.shift_value:
+            y.axpy(self.shift_value, v)
+
+    def shift(self, mat, a):
+        self.shift_value += a
+
+    def free(self):
+        """Destroy the PETSc objects (not named ``destroy``: MatPython calls that one)."""
+        for obj in (self.shell, self.assembled, self.gauss_newton, self.sobolev, self.unscale,
+                    self.xhat, self.work):
+            obj.destroy()
+
+
 def _set_default_options(prefix: str, defaults: dict) -> None:
     opts = PETSc.Options(prefix)
     for key, value in defaults.items():
@@ -195,6 +327,8 @@ def solve(
     """
     comm = problem.constraints.comm
     _set_default_options(options_prefix, {**DEFAULT_OPTIONS, **(defaults or {})})
+    tao_type = PETSc.Options(options_prefix).getString("tao_type")
+    _set_default_options(options_prefix, TYPE_OPTIONS.get(tao_type, {}))
     if max_it is not None:
         _set_default_options(options_prefix, {"tao_max_it": max_it})
 
@@ -216,12 +350,10 @@ def solve(
     history = []
 
     def record(tao):
-        it, f, gnorm, _, step, _ = tao.getSolutionStatus()
+        _, f, gnorm, _, step, _ = tao.getSolutionStatus()
         problem.set_from_x(tao.getSolution())
-        entry = {"it": int(it), "H": float(f), "E": problem.dirichlet_energy(),
+        entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
                  "gnorm": float(gnorm), "step": float(step)}
-        if history and history[-1]["it"] == entry["it"]:
-            history.pop()  # some TAO types report iteration 0 twice (restart)
         history.append(entry)
         if monitor is not None:
             monitor(entry)
@@ -230,6 +362,11 @@ def solve(
     tao.setOptionsPrefix(options_prefix)
     tao.setSolution(x)
     tao.setObjectiveGradient(objective_gradient, g)
+    model = None
+    if tao_type in SECOND_ORDER_TYPES:
+        damping = PETSc.Options(options_prefix).getReal("frames_gn_damping", 1.0)
+        model = GaussNewtonModel(problem, x, damping=damping)
+        tao.setHessian(model.update, model.shell, model.assembled)
     tao.setUpdate(update)
     tao.setMonitor(record)
     tao.setFromOptions()
@@ -239,8 +376,10 @@ def solve(
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     problem.set_from_x(tao.getSolution())
     reason = converged_reason_name(tao.getConvergedReason())
-    iterations = tao.getIterationNumber()
+    iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
     tao.destroy()
+    if model is not None:
+        model.free()
     x.destroy()
     g.destroy()
     return SolveResult(history=history, converged_reason=reason, iterations=iterations,
