@@ -393,6 +393,29 @@ def test_project_survives_extreme_magnitudes():
         np.testing.assert_allclose(scaled, p, atol=1e-13 * np.abs(q).max())
 
 
+def test_blocked_evaluation_equals_whole_arrays(monkeypatch):
+    rng = np.random.default_rng(16)
+    q = np.concatenate([rng.standard_normal((250, 5)), adversarial_q(rng, 50)])
+    dq = rng.standard_normal(q.shape)
+    calls = {
+        "project": lambda: odeco.project(q),
+        "isotropic": lambda: odeco.project(q, isotropic=True),
+        "mandel": lambda: odeco.project(q, method="mandel"),
+        "q_to_frames": lambda: odeco.q_to_frames(q),
+        "tangent_basis": lambda: odeco.tangent_basis(q),
+        "tangent_project": lambda: odeco.tangent_project(q, dq),
+    }
+
+    def arrays(result):
+        return result if isinstance(result, tuple) else (result,)
+
+    whole = {name: arrays(call()) for name, call in calls.items()}
+    monkeypatch.setattr(odeco, "_CHUNK_ROWS", 64)  # 300 rows: 4 full blocks and a partial one
+    for name, call in calls.items():
+        for got, want in zip(arrays(call()), whole[name], strict=True):
+            np.testing.assert_array_equal(got, want, err_msg=name)
+
+
 # --- tangent spaces ----------------------------------------------------------------
 
 
