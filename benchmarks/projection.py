@@ -37,12 +37,17 @@ def near_variety(rng, n, isotropic, noise=1e-3):
 
 
 def best_time(func, repeat):
-    times = []
+    """Best wall-clock and best CPU (process) time over ``repeat`` runs, in seconds.
+
+    CPU time is the fairer number on a shared machine; wall time is the one that counts.
+    """
+    wall, cpu = [], []
     for _ in range(repeat):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         func()
-        times.append(time.perf_counter() - start)
-    return min(times)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return min(wall), min(cpu)
 
 
 def unchunked(func):
@@ -87,23 +92,27 @@ def main(argv=None):
         cases.append(
             (f"project  {name}, method='mandel'", lambda q=q: odeco.project(q, method="mandel"))
         )
-    q = inputs["near variety"]
-    cases.append(("tangent_project  near variety", lambda: odeco.tangent_project(q, steps)))
+    near = inputs["near variety"]
+    cases.append(("tangent_project  near variety", lambda: odeco.tangent_project(near, steps)))
 
     print(f"N = {n} vertices, best of {args.repeat}")
-    print(f"{'variant':<48} {'M vertices/s':>12} {'s per run':>10}")
+    print(f"{'variant':<44} {'M vertices/s':>12} {'(CPU time)':>10} {'s per run':>10}")
     results = {}
     for label, func in cases:
-        seconds = best_time(func, args.repeat)
-        results[label] = n / seconds / 1e6
-        print(f"{label:<48} {results[label]:>12.2f} {seconds:>10.3f}", flush=True)
-    worst = min(
+        wall, cpu = best_time(func, args.repeat)
+        results[label] = n / wall / 1e6, n / cpu / 1e6
+        print(f"{label:<44} {results[label][0]:>12.2f} {results[label][1]:>10.2f} {wall:>10.3f}")
+    closest = [
         v
         for k, v in results.items()
         if k.startswith("project") and "'mandel'" not in k and "unchunked" not in k
+    ]
+    worst_wall, worst_cpu = min(v[0] for v in closest), min(v[1] for v in closest)
+    verdict = "meets" if worst_wall >= TARGET else "MISSES"
+    print(
+        f"slowest closest-point variant: {worst_wall:.2f} M/s wall, {worst_cpu:.2f} M/s CPU "
+        f"({verdict} the {TARGET:g} M/s target in wall time)"
     )
-    verdict = "meets" if worst >= TARGET else "MISSES"
-    print(f"slowest closest-point variant: {worst:.2f} M/s ({verdict} the {TARGET:g} M/s target)")
     return results
 
 
