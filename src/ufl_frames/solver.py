@@ -49,14 +49,19 @@ from ufl_frames import energy, projection  # noqa: E402
 #: TAO defaults of the note's projected gradient method (overridable from the command line).
 DEFAULT_OPTIONS = {
     "tao_type": "bncg",
-    "tao_gatol": 1e-10,
-    "tao_grtol": 1e-7,
+    "tao_gatol": 1e-12,
+    "tao_grtol": 0.0,
+    "tao_gttol": 1e-6,  # |g| / |g_0|: the relative Riemannian gradient norm
     "tao_max_funcs": 1_000_000,
 }
 
 #: Defaults that apply to one TAO type only.
 TYPE_OPTIONS = {
     "bncg": {"tao_bncg_type": "gd", "tao_ls_type": "armijo"},
+    "nls": {"tao_nls_pc_type": "gamg"},
+    "ntr": {"tao_ntr_pc_type": "gamg"},
+    "bnls": {"tao_bnk_pc_type": "gamg"},
+    "bntr": {"tao_bnk_pc_type": "gamg"},
 }
 
 _REASONS = {
@@ -227,16 +232,20 @@ class GaussNewtonModel:
     * λ (K + M): Levenberg–Marquardt damping in the H¹ metric. H has a large family
       of minimisers (integrable fields are far from unique), so JᵀJ is singular;
       an L² (identity) damping lets the steps excite rough null directions, an H¹
-      damping keeps them smooth. λ = λ₀ |g|/|g₀| · mean|q|² vanishes at convergence,
-      which keeps the local Gauss–Newton rate (``-frames_gn_damping λ₀``, default 1).
+      damping keeps them smooth. λ = λ₀ max(r, min(1, |g|/|g₀|)) · mean|q|² decreases
+      with the gradient down to the floor r (``-frames_gn_damping λ₀``, default 1;
+      ``-frames_gn_damping_min r``, default 1e-3). Without a floor the Newton systems
+      become singular and the Krylov iterations explode (measured: 85 Newton steps and
+      ~70 s against 35 steps and ~3 s with r = 1e-3 on the annulus at h = 0.05).
 
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix, so ``-tao_nls_pc_type`` / ``-tao_ntr_pc_type``
     (gamg, hypre, lu, ...) act on it.
     """
 
-    def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0):
-        self.problem, self.damping = problem, damping
+    def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0,
+                 damping_min: float = 1e-3):
+        self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.gauss_newton = dolfinx.fem.petsc.create_matrix(problem.gauss_newton)
         self.unscale = template.duplicate()
         self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], 5)
@@ -265,7 +274,8 @@ class GaussNewtonModel:
         scale = problem.constraints.comm.allreduce(
             float(np.einsum("ni,ni->", problem.rows[:n], problem.rows[:n])), op=MPI.SUM
         ) / problem.q.function_space.dofmap.index_map.size_global
-        self.lam = self.damping * min(1.0, gnorm / self.gnorm0) * scale
+        ratio = min(1.0, gnorm / self.gnorm0)
+        self.lam = self.damping * max(self.damping_min, ratio) * scale
         G.axpy(self.lam, self.sobolev, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         tangent, normal = problem.tangent_projectors()
         if result is None:
@@ -364,8 +374,9 @@ def solve(
     tao.setObjectiveGradient(objective_gradient, g)
     model = None
     if tao_type in SECOND_ORDER_TYPES:
-        damping = PETSc.Options(options_prefix).getReal("frames_gn_damping", 1.0)
-        model = GaussNewtonModel(problem, x, damping=damping)
+        opts = PETSc.Options(options_prefix)
+        model = GaussNewtonModel(problem, x, damping=opts.getReal("frames_gn_damping", 1.0),
+                                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3))
         tao.setHessian(model.update, model.shell, model.assembled)
     tao.setUpdate(update)
     tao.setMonitor(record)
