@@ -1,0 +1,219 @@
+r"""The TAO frame-field solver (:mod:`ufl_frames.solver`) on the annulus.
+
+Truth (NOTES §4): the integrable annulus fields aligned with the boundary are
+(g(r) e_r, c r e_θ) with any radial g, and isotropic ones (c r e_r, c r e_θ). So from
+the MBO cross field (the e_r, e_θ cross with unit lengths) the solver must
+
+* isotropic: drive H down (≥ 100x here) towards lengths proportional to r;
+* non-isotropic: make the tangential length proportional to r (the radial one is free);
+* converge to a residual H that vanishes as O(h²) under mesh refinement.
+
+A linear fit through 0 of length against r measures "proportional to r" by
+R² = 1 − Σ(l − c r)² / Σ(l − mean l)² over the vertices. Which branch is tangential is
+read off the frame angle t ∈ (−π/4, π/4] of :func:`odeco.q_to_frames` (l1 is the length
+along (cos t, sin t)): l1 is radial where t ≡ φ (mod π), tangential where t ≡ φ + π/2.
+
+Every ``solve`` call uses its own options prefix, or the global PETSc options database is
+restored after the test (``tests/conftest.py``): ``solve`` writes its defaults there.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ufl_frames import energy, mbo, odeco, solver
+
+
+def mbo_problem(annulus_mesh, h, isotropic, comm=MPI.COMM_WORLD, mbo_prefix="mbo_"):
+    mesh = annulus_mesh(h, comm)
+    q = mbo.mbo_frame_field(energy.frame_space(mesh), options_prefix=mbo_prefix)
+    return solver.frame_problem(q, isotropic=isotropic)
+
+
+def radial_and_tangential(problem):
+    """(r, radial length, tangential length, |angle error vs the e_r cross|) at owned vertices."""
+    n = problem.owned
+    lengths, t = odeco.q_to_frames(problem.rows[:n])
+    x = problem.q.function_space.tabulate_dof_coordinates()[:n]
+    r, phi = np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])
+    offset = (t - phi) % np.pi  # 0 or π: l1 radial; π/2: l1 tangential
+    l1_radial = np.minimum(offset, np.pi - offset) < np.pi / 4
+    radial = np.where(l1_radial, lengths[:, 0], lengths[:, 1])
+    tangential = np.where(l1_radial, lengths[:, 1], lengths[:, 0])
+    angle_error = np.abs((t - phi + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+    return r, radial, tangential, angle_error
+
+
+def fit_through_origin(comm, r, y):
+    """(c, R²) of the least-squares fit y ≈ c r over all ranks."""
+    sums = comm.allreduce(np.array([r @ y, r @ r, y.sum(), y @ y, y.size]), op=MPI.SUM)
+    ry, rr, sy, yy, count = sums
+    c = ry / rr
+    residual = yy - 2 * c * ry + c * c * rr
+    total = yy - sy * sy / count
+    return c, 1.0 - residual / total
+
+
+def global_max(comm, values):
+    return comm.allreduce(float(np.max(values, initial=0.0)), op=MPI.MAX)
+
+
+def check_reason(result):
+    """TAO stopped on a tolerance or on the iteration limit, not on a failure."""
+    assert result.converged_reason.startswith("CONVERGED") or (
+        result.converged_reason == "DIVERGED_MAXITS"
+    ), result.converged_reason
+
+
+def test_isotropic_annulus_from_mbo(annulus_mesh):
+    comm = MPI.COMM_WORLD
+    problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
+    H0 = problem.energy()
+    result = solver.solve(problem, max_it=30, options_prefix="iso_")
+    check_reason(result)
+    H = problem.energy()
+    assert H == pytest.approx(result.H_final, rel=1e-12)
+    history = np.array([entry["H"] for entry in result.history])
+    assert history[0] == pytest.approx(H0, rel=1e-12)
+    assert np.all(np.diff(history) <= 1e-12 * H0)  # Armijo: monotone decrease
+
+    r, radial, tangential, angle_error = radial_and_tangential(problem)
+    assert np.allclose(radial, tangential, rtol=1e-10)  # isotropic
+    slope, r2 = fit_through_origin(comm, r, tangential)
+    max_angle = global_max(comm, angle_error)
+    if comm.rank == 0:
+        print(f"\nisotropic annulus h = 0.1: H {H0:.4f} -> {H:.3e} ({H0 / H:.0f}x) in "
+              f"{result.iterations} iterations ({result.converged_reason}); l = {slope:.4f} r "
+              f"with R^2 = {r2:.5f}; max angle error vs e_r {max_angle:.1e}")
+    assert H <= H0 / 100
+    assert r2 >= 0.99
+    assert max_angle < 0.05
+
+
+def test_nonisotropic_annulus_tangential_length(annulus_mesh):
+    comm = MPI.COMM_WORLD
+    problem = mbo_problem(annulus_mesh, 0.1, isotropic=False)
+    H0 = problem.energy()
+    result = solver.solve(problem, max_it=60, options_prefix="noniso_")
+    check_reason(result)
+    H = result.H_final
+    r, radial, tangential, angle_error = radial_and_tangential(problem)
+    slope, r2 = fit_through_origin(comm, r, tangential)
+    _, r2_radial = fit_through_origin(comm, r, radial)
+    if comm.rank == 0:
+        print(f"\nnon-isotropic annulus h = 0.1: H {H0:.4f} -> {H:.3e} ({H0 / H:.0f}x) in "
+              f"{result.iterations} iterations; tangential l = {slope:.4f} r with "
+              f"R^2 = {r2:.5f} (radial length: R^2 = {r2_radial:.2f}, free)")
+    assert H <= H0 / 100
+    assert r2 >= 0.99
+
+
+def test_residual_energy_vanishes_under_refinement(annulus_mesh):
+    """Isotropic annulus, L-BFGS (``lmvm``) to a plateau: residual H = O(h²).
+
+    (``lmvm`` reaches the same residual as the Gauss–Newton ``nls`` to 0.1 % here; the
+    three-size study is in ``benchmarks/solver.py --study``.)
+    """
+    comm = MPI.COMM_WORLD
+    sizes, residuals, iterations = [], [], []
+    for h in (0.1, 0.05):
+        problem = mbo_problem(annulus_mesh, h, isotropic=True)
+        result = solver.solve(
+            problem, max_it=150, options_prefix="refine_", defaults={"tao_type": "lmvm"}
+        )
+        check_reason(result)
+        cells = problem.q.function_space.mesh.topology.index_map(2).size_global
+        sizes.append(1.0 / math.sqrt(cells))
+        residuals.append(result.H_final)
+        iterations.append(result.iterations)
+    rate = math.log(residuals[0] / residuals[1]) / math.log(sizes[0] / sizes[1])
+    if comm.rank == 0:
+        print(f"\nresidual H (isotropic, lmvm) at h = 0.1, 0.05: {residuals[0]:.4e}, "
+              f"{residuals[1]:.4e} in {iterations} iterations; rate {rate:.2f}")
+    assert rate >= 1.8
+
+
+def test_parallel_history_matches_serial(annulus_mesh):
+    """The same 30 iterations on COMM_SELF and COMM_WORLD (meaningful under mpirun).
+
+    The MBO solves are tightened to rtol 1e-12: with MBO's default 1e-10 the initial fields
+    differ by ~6e-12 (GAMG differs in parallel), which 30 steps amplify to ~3e-9.
+    """
+    PETSc.Options()["exact_mbo_ksp_rtol"] = 1e-12  # removed by the conftest fixture
+    histories = {}
+    for name, comm in (("self", MPI.COMM_SELF), ("world", MPI.COMM_WORLD)):
+        problem = mbo_problem(annulus_mesh, 0.1, True, comm=comm, mbo_prefix="exact_mbo_")
+        result = solver.solve(problem, max_it=30, options_prefix=f"{name}_")
+        histories[name] = np.array([[e["H"], e["E"]] for e in result.history])
+        assert problem.energy() == pytest.approx(result.H_final, rel=1e-12)
+    serial, parallel = histories["self"], histories["world"]
+    assert serial.shape == parallel.shape
+    worst = np.max(np.abs(parallel - serial) / np.abs(serial))
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"\n{len(serial)} history entries, COMM_SELF vs COMM_WORLD "
+              f"(size {MPI.COMM_WORLD.size}): worst relative difference of H, E {worst:.1e}")
+    assert worst < 1e-8
+
+
+def test_gauss_newton_parallel_matches_serial(annulus_mesh):
+    """The Gauss–Newton path (``nls``, a PETSc Hessian) on COMM_SELF and COMM_WORLD."""
+    finals = {}
+    for name, comm in (("self", MPI.COMM_SELF), ("world", MPI.COMM_WORLD)):
+        problem = mbo_problem(annulus_mesh, 0.1, isotropic=True, comm=comm)
+        result = solver.solve(
+            problem, max_it=40, options_prefix=f"gn_{name}_", defaults={"tao_type": "nls"}
+        )
+        assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
+        finals[name] = result.H_final
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"\nnls converged H on COMM_SELF {finals['self']:.10e}, "
+              f"on COMM_WORLD (size {MPI.COMM_WORLD.size}) {finals['world']:.10e}")
+    assert finals["world"] == pytest.approx(finals["self"], rel=1e-6)
+
+
+def test_tao_options_are_honoured(annulus_mesh):
+    """Options in the database win over solve()'s defaults, with and without a prefix."""
+    problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
+    q0 = problem.q.x.array.copy()
+    opts = PETSc.Options()
+    try:
+        opts["tao_max_it"] = 3
+        result = solver.solve(problem, max_it=30)
+        # bncg reports iteration 0 twice (after its first step), so the history may hold
+        # one more step than TAO's own count.
+        assert result.converged_reason == "DIVERGED_MAXITS"
+        assert result.iterations in (3, 4)
+
+        problem.q.x.array[:] = q0
+        opts["opt_tao_type"] = "lmvm"
+        opts["opt_tao_max_it"] = 5
+        result = solver.solve(problem, max_it=30, options_prefix="opt_")
+        assert result.converged_reason == "DIVERGED_MAXITS"
+        assert result.iterations == 5
+
+        problem.q.x.array[:] = q0
+        opts["opt_tao_gatol"] = 1e6  # stop at once: the gradient norm is far below
+        result = solver.solve(problem, max_it=30, options_prefix="opt_")
+        assert result.converged_reason == "CONVERGED_GATOL"
+        assert result.iterations == 0
+    finally:
+        for name in ("tao_max_it", "opt_tao_type", "opt_tao_max_it", "opt_tao_gatol"):
+            opts.delValue(name)
+    assert not opts.hasName("tao_max_it")
+
+
+@pytest.mark.xfail(
+    reason="solver.solve leaves its defaults (tao_max_it, tao_type, ...) in the global PETSc "
+    "options database, where they look user-given to the next solve() with the same prefix",
+    strict=False,
+)
+def test_max_it_of_a_later_solve_is_honoured(annulus_mesh):
+    problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
+    q0 = problem.q.x.array.copy()
+    solver.solve(problem, max_it=2, options_prefix="twice_")
+    problem.q.x.array[:] = q0
+    result = solver.solve(problem, max_it=8, options_prefix="twice_")
+    assert result.iterations >= 8
