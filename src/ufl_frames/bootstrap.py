@@ -12,6 +12,7 @@ import time; scripts call it themselves, first, to pass their ``argv``.
 """
 
 import sys
+from contextlib import contextmanager
 
 _initialised = False
 
@@ -29,3 +30,23 @@ def init_petsc(argv: list[str] | None = None) -> None:
 
     petsc4py.init(sys.argv if argv is None else argv)
     _initialised = True
+
+
+@contextmanager
+def petsc_defaults(prefix: str, defaults: dict):
+    """Set PETSc options of ``prefix`` that the user did not give; remove them on exit.
+
+    The options database is global: defaults left behind would leak into the next
+    solve in the same process (a second ``solve(max_it=...)`` would keep the first).
+    """
+    from petsc4py import PETSc
+
+    opts = PETSc.Options(prefix)
+    added = [key for key in defaults if not opts.hasName(key)]
+    for key in added:
+        opts[key] = defaults[key]
+    try:
+        yield opts
+    finally:
+        for key in added:
+            opts.delValue(key)

@@ -21,7 +21,7 @@ The linear solves use a PETSc KSP with options prefix ``mbo_`` (``-mbo_ksp_type`
 
 import math
 
-from ufl_frames.bootstrap import init_petsc
+from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
@@ -92,12 +92,9 @@ def mbo_frame_field(
     rhs = dolfinx.fem.petsc.create_vector(V)
     ksp = PETSc.KSP().create(mesh.comm)
     ksp.setOptionsPrefix(options_prefix)
-    opts = PETSc.Options(options_prefix)
-    for key, value in {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-10}.items():
-        if not opts.hasName(key):
-            opts[key] = value
     ksp.setOperators(A)
-    ksp.setFromOptions()
+    with petsc_defaults(options_prefix, {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-10}):
+        ksp.setFromOptions()
 
     rows = q.x.array.reshape(-1, 5)
     interior = constraints.interior

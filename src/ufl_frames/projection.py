@@ -12,7 +12,7 @@ boundary edges (weighted by length): at a right-angled corner both edges give th
 same cross, at other corners the average is the cross closest to both.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ufl_frames.bootstrap import init_petsc
 
@@ -110,6 +110,35 @@ def frame_constraints(V, isotropic: bool = False) -> FrameConstraints:
         owned=index_map.size_local,
         isotropic=isotropic,
         comm=mesh.comm,
+    )
+
+
+def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray) -> FrameConstraints:
+    """Constraints that also fix the cross orientation at the vertices of singular triangles.
+
+    The vertices of every triangle with a nonzero index (see
+    :mod:`ufl_frames.singularities`) are treated like boundary vertices: orientation
+    held at its current value, lengths free. The singularities then stay where the
+    initial field put them — the solver can neither move nor annihilate them — which
+    is the intended use of the MBO field as a template (note §3, "Initial condition").
+    """
+    from ufl_frames.singularities import triangle_indices
+
+    cells = V.dofmap.list
+    x = V.tabulate_dof_coordinates()
+    singular = cells[triangle_indices(cells, q, coords=x) != 0]
+    marker = dolfinx.la.vector(V.dofmap.index_map, 1)
+    marker.array[singular.ravel()] = 1.0
+    marker.scatter_reverse(dolfinx.la.InsertMode.add)
+    marker.scatter_forward()
+    marker.array[constraints.boundary] = 0.0
+    pinned = np.flatnonzero(marker.array > 0).astype(np.int32)
+    _, angles = odeco.q_to_frames(q[pinned])
+    normals = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    return replace(
+        constraints,
+        boundary=np.concatenate([constraints.boundary, pinned]),
+        normals=np.concatenate([constraints.normals, normals]),
     )
 
 

@@ -31,7 +31,7 @@ gave no value, and ``setFromOptions`` comes last.
 import time
 from dataclasses import dataclass, field
 
-from ufl_frames.bootstrap import init_petsc
+from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
@@ -166,13 +166,19 @@ def _block_diagonal(blocks: np.ndarray, index_map, comm) -> PETSc.Mat:
     )
 
 
-def frame_problem(q: fem.Function, isotropic: bool = False) -> FrameProblem:
+def frame_problem(
+    q: fem.Function, isotropic: bool = False, pin_singularities: bool = True
+) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
-    The normalisation (step 5) keeps the lumped L² norm of the retracted ``q``.
+    The normalisation (step 5) keeps the lumped L² norm of the retracted ``q``. With
+    ``pin_singularities`` the cross orientation is held at the vertices of the
+    singular triangles of ``q`` (see :func:`projection.pin_singularities`).
     """
     V = q.function_space
     constraints = projection.frame_constraints(V, isotropic=isotropic)
+    if pin_singularities:
+        constraints = projection.pin_singularities(V, constraints, q.x.array.reshape(-1, 5))
     H = energy.integrability_energy_form(q)
     problem = FrameProblem(
         q=q,
@@ -316,13 +322,6 @@ class GaussNewtonModel:
             obj.destroy()
 
 
-def _set_default_options(prefix: str, defaults: dict) -> None:
-    opts = PETSc.Options(prefix)
-    for key, value in defaults.items():
-        if not opts.hasName(key):
-            opts[key] = value
-
-
 def solve(
     problem: FrameProblem,
     max_it: int | None = None,
@@ -336,11 +335,17 @@ def solve(
     receives each history entry ``{"it", "H", "E", "gnorm", "step"}`` (on every rank).
     """
     comm = problem.constraints.comm
-    _set_default_options(options_prefix, {**DEFAULT_OPTIONS, **(defaults or {})})
-    tao_type = PETSc.Options(options_prefix).getString("tao_type")
-    _set_default_options(options_prefix, TYPE_OPTIONS.get(tao_type, {}))
+    options = {**DEFAULT_OPTIONS, **(defaults or {})}
+    tao_type = PETSc.Options(options_prefix).getString("tao_type", options["tao_type"])
+    options.update(TYPE_OPTIONS.get(tao_type, {}))
     if max_it is not None:
-        _set_default_options(options_prefix, {"tao_max_it": max_it})
+        options["tao_max_it"] = max_it
+    with petsc_defaults(options_prefix, options):
+        return _solve(problem, tao_type, options_prefix, monitor)
+
+
+def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
+    comm = problem.constraints.comm
 
     V = problem.q.function_space
     x = dolfinx.fem.petsc.create_vector(V)
