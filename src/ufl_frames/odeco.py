@@ -190,27 +190,71 @@ def _tangent_project_rows(q, dq):
     return dq - np.einsum("nik,nk->ni", basis, coeff)
 
 
-def tangent_basis(q) -> np.ndarray:
+def tangent_basis(q, max_aspect: float | None = None, gradient=None) -> np.ndarray:
     """Orthonormal basis (N, 5, 3) of the tangent space of the variety at the frames nearest q.
 
     Columns: e_s (total length), e_d (length difference) and ∂q/∂t (rotation), which
     are mutually orthogonal for every frame. Used to reduce second-order methods
     to the 3 tangent degrees of freedom per vertex.
+
+    With ``max_aspect`` A, frames at the aspect bound l_max/l_min = A (see
+    :func:`clamp_aspect`) whose ``gradient`` (N, 5; default: none given) pushes the
+    aspect further out lose their e_d column, and e_s becomes the direction along the
+    bound (an active set: a gradient pointing inwards releases the frame).
     """
     q = _check_q(q)
     _check_nonzero(q)
-    return _by_chunks(_tangent_basis_rows, q)
+    if gradient is None:
+        gradient = np.zeros_like(q)
+    gradient = _check_q(gradient, "gradient")
+    return _by_chunks(lambda a, g: _tangent_basis_rows(a, max_aspect, g), q, gradient)
 
 
-def _tangent_basis_rows(q):
+def _tangent_basis_rows(q, max_aspect, gradient):
     s, d, c4, s4 = _closest_parameters(q, isotropic=False)
     c2, s2 = _half_angle(c4, s4)
     zero = np.zeros_like(s)
     e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
     e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
     dq_dt = np.stack([zero, -d * s2, d * c2, -s * s4 / 2, s * c4 / 2], axis=1)
+    if max_aspect is not None:
+        kappa = _aspect_kappa(max_aspect)
+        sign = np.where(d < 0, -1.0, 1.0)
+        at_bound = np.abs(d) >= kappa * s * (1 - 1e-9)
+        # Descent −g moves d outwards when sign · (g · e_d) < 0.
+        outwards = sign * np.einsum("ni,ni->n", gradient, e_d) <= 0
+        active = (at_bound & outwards)[:, None]
+        e_s = np.where(active, e_s + (sign * kappa)[:, None] * e_d, e_s)
+        e_d = np.where(active, 0.0, e_d)
     basis = np.stack([e_s, e_d, dq_dt], axis=2)
-    return basis / np.linalg.norm(basis, axis=1, keepdims=True)
+    norm = np.linalg.norm(basis, axis=1, keepdims=True)
+    return basis / np.where(norm > 0, norm, 1.0)
+
+
+def _aspect_kappa(max_aspect: float) -> float:
+    if not (np.isfinite(max_aspect) and max_aspect >= 1):
+        raise ValueError(f"max_aspect must be a finite number >= 1, got {max_aspect}")
+    return (max_aspect - 1) / (max_aspect + 1)
+
+
+def clamp_aspect(s, d, max_aspect: float):
+    """Least-squares (s, d) with l_max/l_min ≤ ``max_aspect``, i.e. |d| ≤ κ s, κ = (A−1)/(A+1).
+
+    For a fixed angle the frames are s e_s + d e_d with |e_s|² = 19/64, |e_d|² = 1/4,
+    so the constrained fit projects (s, d) onto the ray d = ±κ s in that metric.
+    Frames inside the bound are returned unchanged. Without the bound the
+    non-isotropic energy has degenerate minimisers: one branch collapses (l → 0, or
+    negative), which makes the bracket vanish trivially.
+    """
+    kappa = _aspect_kappa(max_aspect)
+    s = np.asarray(s, dtype=np.float64)
+    d = np.asarray(d, dtype=np.float64)
+    sign = np.where(d < 0, -1.0, 1.0)
+    outside = np.abs(d) > kappa * s
+    s_ray = (_ES_NORM2 * s + _ED_NORM2 * kappa * sign * d) / (_ES_NORM2 + _ED_NORM2 * kappa**2)
+    # A fit with s ≤ 0 (an inverted frame, only at wild trial points) stays a tiny frame.
+    s_ray = np.maximum(s_ray, 1e-8 * (np.abs(s) + np.abs(d)))
+    return np.where(outside, s_ray, s), np.where(outside, sign * kappa * s_ray, d)
 
 
 # --- projections ----------------------------------------------------------------
@@ -395,12 +439,15 @@ def tensor_components(q) -> np.ndarray:
     return monomial / np.array([1.0, 4.0, 6.0, 4.0, 1.0])
 
 
-def project(q, isotropic: bool = False, method: str = "closest") -> np.ndarray:
+def project(
+    q, isotropic: bool = False, method: str = "closest", max_aspect: float | None = None
+) -> np.ndarray:
     """Nearest Odeco tensors (note §2.1, §3 step 4); with ``isotropic`` the nearest with l1 = l2.
 
     ``method="closest"`` (default) is the exact Euclidean closest point in q (see
     module docstring); ``method="mandel"`` is the note's eigentensor projection,
-    kept for comparison only.
+    kept for comparison only. ``max_aspect`` bounds l_max/l_min: the lengths at the
+    closest angle are then fitted under the bound (:func:`clamp_aspect`).
     """
     q = _check_q(q)
     _check_nonzero(q)
@@ -408,16 +455,20 @@ def project(q, isotropic: bool = False, method: str = "closest") -> np.ndarray:
         return _by_chunks(lambda block: _project_mandel(block, isotropic), q)
     if method != "closest":
         raise ValueError(f"unknown projection method {method!r}: use 'closest' or 'mandel'")
-    return _by_chunks(lambda block: _project_closest(block, isotropic), q)
+    return _by_chunks(lambda block: _project_closest(block, isotropic, max_aspect), q)
 
 
-def _project_closest(q, isotropic):
+def _project_closest(q, isotropic, max_aspect=None):
     s, d, c4, s4 = _closest_parameters(q, isotropic)
+    if max_aspect is not None and not isotropic:
+        s, d = clamp_aspect(s, d, max_aspect)
     c2, s2 = _half_angle(c4, s4)
     return _q_from_parameters(s, d, c2, s2, c4, s4)
 
 
-def project_aligned(q, normals, isotropic: bool = False) -> np.ndarray:
+def project_aligned(
+    q, normals, isotropic: bool = False, max_aspect: float | None = None
+) -> np.ndarray:
     """Boundary projection (note §3): orientation fixed by ``normals`` (N, 2), lengths free.
 
     One branch is aligned with the normal (the other with the tangent); the lengths
@@ -434,4 +485,6 @@ def project_aligned(q, normals, isotropic: bool = False) -> np.ndarray:
     c2, s2 = c1 * c1 - s1 * s1, 2 * s1 * c1
     c4, s4 = c2 * c2 - s2 * s2, 2 * s2 * c2
     s, d, c2, s2 = _best_lengths(q, c4, s4, isotropic)
+    if max_aspect is not None and not isotropic:
+        s, d = clamp_aspect(s, d, max_aspect)
     return _q_from_parameters(s, d, c2, s2, c4, s4)

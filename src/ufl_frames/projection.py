@@ -43,6 +43,7 @@ class FrameConstraints:
     owned: int
     isotropic: bool
     comm: MPI.Comm
+    max_aspect: float | None = None
 
     @property
     def interior(self) -> np.ndarray:
@@ -68,7 +69,9 @@ def _vertex_rows_of_facets(V, facets):
     return rows
 
 
-def frame_constraints(V, isotropic: bool = False) -> FrameConstraints:
+def frame_constraints(
+    V, isotropic: bool = False, max_aspect: float | None = None
+) -> FrameConstraints:
     """Boundary rows, their normals and lumped-mass weights for the frame space ``V``."""
     mesh = V.mesh
     tdim = mesh.topology.dim
@@ -110,6 +113,7 @@ def frame_constraints(V, isotropic: bool = False) -> FrameConstraints:
         owned=index_map.size_local,
         isotropic=isotropic,
         comm=mesh.comm,
+        max_aspect=None if isotropic else max_aspect,
     )
 
 
@@ -146,37 +150,60 @@ def project_rows(q: np.ndarray, constraints: FrameConstraints) -> np.ndarray:
     """Step 4 of note §3: Odeco projection inside, orientation-fixed projection on ∂Ω."""
     out = np.empty_like(q)
     interior = constraints.interior
-    out[interior] = odeco.project(q[interior], isotropic=constraints.isotropic)
+    iso, aspect = constraints.isotropic, constraints.max_aspect
+    out[interior] = odeco.project(q[interior], isotropic=iso, max_aspect=aspect)
     b = constraints.boundary
-    out[b] = odeco.project_aligned(q[b], constraints.normals, isotropic=constraints.isotropic)
+    out[b] = odeco.project_aligned(q[b], constraints.normals, isotropic=iso, max_aspect=aspect)
     return out
 
 
-def tangent_basis_rows(q: np.ndarray, constraints: FrameConstraints) -> np.ndarray:
+def tangent_basis_rows(
+    q: np.ndarray, constraints: FrameConstraints, gradient: np.ndarray | None = None
+) -> np.ndarray:
     """Orthonormal tangent basis (N, 5, 3) of the constraint set at q (zero columns: no dof).
 
     Interior: 3 dofs (total length e_s, length difference e_d, rotation); isotropic:
     e_s and rotation. Boundary: orientation fixed, so e_s and e_d (isotropic: e_s).
+    With an aspect bound, frames at the bound that ``gradient`` pushes outwards lose
+    e_d (see :func:`ufl_frames.odeco.tangent_basis`).
     """
-    basis = odeco.tangent_basis(q)
+    aspect = constraints.max_aspect
+    basis = odeco.tangent_basis(q, max_aspect=aspect, gradient=gradient)
     b = constraints.boundary
     if b.size:
         c1, s1 = constraints.normals.T
         c2, s2 = c1 * c1 - s1 * s1, 2 * s1 * c1
         c4, s4 = c2 * c2 - s2 * s2, 2 * s2 * c2
+        e_s = np.zeros((b.size, 5))
+        e_s[:, 0], e_s[:, 3], e_s[:, 4] = 3 * odeco.SQRT2 / 8, c4 / 8, s4 / 8
+        e_d = np.zeros((b.size, 5))
+        e_d[:, 1], e_d[:, 2] = c2 / 2, s2 / 2
+        if aspect is not None:
+            kappa = (aspect - 1) / (aspect + 1)
+            s_len = np.einsum("ni,ni->n", q[b], e_s) / (19 / 64)
+            d_len = 4 * np.einsum("ni,ni->n", q[b], e_d)
+            sign = np.where(d_len < 0, -1.0, 1.0)
+            g = np.zeros((b.size, 5)) if gradient is None else gradient[b]
+            active = (np.abs(d_len) >= kappa * s_len * (1 - 1e-9)) & (
+                sign * np.einsum("ni,ni->n", g, e_d) <= 0
+            )
+            e_s = np.where(active[:, None], e_s + (sign * kappa)[:, None] * e_d, e_s)
+            e_d = np.where(active[:, None], 0.0, e_d)
         basis[b] = 0.0
-        basis[b, 0, 0] = 3 * odeco.SQRT2 / 8
-        basis[b, 3, 0], basis[b, 4, 0] = c4 / 8, s4 / 8
-        basis[b, :, 0] /= np.sqrt(19 / 64)
-        basis[b, 1, 1], basis[b, 2, 1] = c2, s2
+        basis[b, :, 0] = e_s / np.linalg.norm(e_s, axis=1, keepdims=True)
+        norm_d = np.linalg.norm(e_d, axis=1, keepdims=True)
+        basis[b, :, 1] = e_d / np.where(norm_d > 0, norm_d, 1.0)
     if constraints.isotropic:
         basis[:, :, 1] = 0.0
     return basis
 
 
 def tangent_project_rows(q: np.ndarray, dq: np.ndarray, constraints: FrameConstraints):
-    """Step 2 of note §3: the part of ``dq`` tangent to the constraint set at q (on it)."""
-    basis = tangent_basis_rows(q, constraints)
+    """Step 2 of note §3: the part of ``dq`` tangent to the constraint set at q (on it).
+
+    ``dq`` is a gradient here: it also decides the active aspect bounds.
+    """
+    basis = tangent_basis_rows(q, constraints, gradient=dq)
     return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
 
 

@@ -20,10 +20,16 @@ with steps 4–5 as the retraction R. Here TAO runs it:
 * TAO's update hook retracts the iterate, x ← R(x), at the start of every iteration,
   so every iterate lies on 𝓜 and its gradient is exact.
 
-TAO supplies the search direction (``-tao_type``: ``bncg`` with ``-tao_bncg_type gd`` is
-the note's steepest descent, the default here; ``lmvm``, other ``bncg`` variants ...),
-the line search (``-tao_ls_type``) and the stopping tests (``-tao_gatol``,
-``-tao_grtol``, ``-tao_max_it``). Every option can be given on the command line,
+TAO supplies the search direction (``-tao_type``), the line search (``-tao_ls_type``)
+and the stopping tests (``-tao_gttol``: relative gradient norm, default 1e-6;
+``-tao_gatol``, ``-tao_max_it``):
+
+* ``nls`` (default), ``ntr``, ``bnls``, ``bntr``: Newton line search / trust region on
+  the Riemannian Gauss–Newton model of :class:`GaussNewtonModel`; the Newton systems
+  are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``, default GAMG);
+* ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
+* ``bncg`` with ``-tao_bncg_type gd`` (set by default for ``bncg``) and an Armijo line
+  search: the note's projected gradient descent. Every option can be given on the command line,
 under ``options_prefix`` (default none): defaults below are set only where the user
 gave no value, and ``setFromOptions`` comes last.
 """
@@ -48,7 +54,7 @@ from ufl_frames import energy, projection  # noqa: E402
 
 #: TAO defaults of the note's projected gradient method (overridable from the command line).
 DEFAULT_OPTIONS = {
-    "tao_type": "bncg",
+    "tao_type": "nls",  # Riemannian Gauss–Newton (GaussNewtonModel); the note's method: bncg
     "tao_gatol": 1e-12,
     "tao_grtol": 0.0,
     "tao_gttol": 1e-6,  # |g| / |g_0|: the relative Riemannian gradient norm
@@ -118,7 +124,8 @@ class FrameProblem:
     def tangent_projectors(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """Block-diagonal P (onto the tangent space of 𝓜 at q, sphere excepted) and I − P."""
         n = self.owned
-        basis = projection.tangent_basis_rows(self.rows, self.constraints)[:n]
+        gradient = getattr(self, "last_gradient", None)
+        basis = projection.tangent_basis_rows(self.rows, self.constraints, gradient)[:n]
         blocks = np.einsum("nik,njk->nij", basis, basis)
         index_map = self.q.function_space.dofmap.index_map
         comm = self.constraints.comm
@@ -144,6 +151,7 @@ class FrameProblem:
         b.scatter_reverse(dolfinx.la.InsertMode.add)
         # Ghost rows of b are partial sums: projected along (pointwise), then dropped.
         dh = b.array.reshape(-1, 5) / self.sqrt_mass[:, None]
+        self.last_gradient = dh  # decides the active aspect bounds of the Hessian too
         dh = projection.tangent_project_rows(self.rows, dh, self.constraints)[:n]
         x = self.rows[:n] * self.sqrt_mass[:n, None]
         comm = self.constraints.comm
@@ -167,16 +175,20 @@ def _block_diagonal(blocks: np.ndarray, index_map, comm) -> PETSc.Mat:
 
 
 def frame_problem(
-    q: fem.Function, isotropic: bool = False, pin_singularities: bool = True
+    q: fem.Function,
+    isotropic: bool = False,
+    pin_singularities: bool = True,
+    max_aspect: float | None = None,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
     The normalisation (step 5) keeps the lumped L² norm of the retracted ``q``. With
     ``pin_singularities`` the cross orientation is held at the vertices of the
-    singular triangles of ``q`` (see :func:`projection.pin_singularities`).
+    singular triangles of ``q`` (see :func:`projection.pin_singularities`). ``max_aspect``
+    bounds l_max/l_min of non-isotropic frames (see :func:`odeco.clamp_aspect`).
     """
     V = q.function_space
-    constraints = projection.frame_constraints(V, isotropic=isotropic)
+    constraints = projection.frame_constraints(V, isotropic=isotropic, max_aspect=max_aspect)
     if pin_singularities:
         constraints = projection.pin_singularities(V, constraints, q.x.array.reshape(-1, 5))
     H = energy.integrability_energy_form(q)
