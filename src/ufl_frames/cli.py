@@ -44,6 +44,7 @@ from ufl_frames.bootstrap import init_petsc
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = 0.05
 DEFAULT_MAX_IT = 500
+DEFAULT_MAX_ASPECT = 4.0
 
 
 class UsageError(Exception):
@@ -122,12 +123,30 @@ def build_parser() -> argparse.ArgumentParser:
                        "or be empty unless --force")
     solve.add_argument("--force", action="store_true",
                        help="write into an existing non-empty output folder, replacing files")
+    solve.add_argument("--max-aspect", type=_aspect, default=DEFAULT_MAX_ASPECT, metavar="A",
+                       help=f"bound on l_max/l_min of non-isotropic frames (default "
+                       f"{DEFAULT_MAX_ASPECT:g}; 'inf' for none: the energy then has degenerate "
+                       "minimisers where a branch collapses)")
+    solve.add_argument("--free-singularities", action="store_true",
+                       help="let the solver move, create and annihilate singularities "
+                       "(default: the cross orientation is held on the MBO field's singular "
+                       "triangles)")
     solve.add_argument("-q", "--quiet", action="store_true", help="no progress output")
 
     commands.add_parser("info", help="print the versions of the libraries in use",
                         description="Print the versions of ufl_frames, DOLFINx, PETSc, "
                         "MPI, Gmsh and friends.")
     return parser
+
+
+def _aspect(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 1 or 'inf', got {text!r}") from None
+    if not value >= 1:  # also rejects NaN
+        raise argparse.ArgumentTypeError(f"must be >= 1 (or 'inf'), got {text!r}")
+    return value
 
 
 def _is_number(token: str) -> bool:
@@ -300,6 +319,8 @@ def run_solve(
     force: bool = False,
     quiet: bool = False,
     comm=None,
+    max_aspect: float = DEFAULT_MAX_ASPECT,
+    free_singularities: bool = False,
 ) -> dict:
     """Mesh → MBO → TAO → singularities → files in ``out``; return the summary (all ranks).
 
@@ -346,7 +367,12 @@ def run_solve(
                 f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}"
             ),
         )
-        problem = solver.frame_problem(q, isotropic=isotropic)
+        problem = solver.frame_problem(
+            q,
+            isotropic=isotropic,
+            pin_singularities=not free_singularities,
+            max_aspect=None if isotropic or math.isinf(max_aspect) else max_aspect,
+        )
         tao_type = PETSc.Options().getString("tao_type", solver.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
         say(f"solving ({kind}, TAO {tao_type}) ...")
@@ -382,6 +408,8 @@ def run_solve(
         "ufl_frames_version": __version__,
         "geometry": geometry,
         "isotropic": bool(isotropic),
+        "max_aspect": None if isotropic or math.isinf(max_aspect) else float(max_aspect),
+        "pinned_singularities": not free_singularities,
         "mesh_size": float(mesh_size),
         "max_it": int(max_it),
         "num_processes": comm.size,
@@ -498,6 +526,8 @@ def main(argv: list[str] | None = None) -> int:
             force=args.force,
             quiet=args.quiet,
             comm=comm,
+            max_aspect=args.max_aspect,
+            free_singularities=args.free_singularities,
         )
     except InputError as e:  # raised on every rank alike (geometry, parameters, folder)
         return _fail(str(e), 1)

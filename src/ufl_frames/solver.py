@@ -121,18 +121,12 @@ class FrameProblem:
         n = self.owned
         x.getArray()[:] = (self.rows[:n] * self.sqrt_mass[:n, None]).ravel()
 
-    def tangent_projectors(self) -> tuple[PETSc.Mat, PETSc.Mat]:
-        """Block-diagonal P (onto the tangent space of 𝓜 at q, sphere excepted) and I − P."""
+    def tangent_blocks(self) -> np.ndarray:
+        """Per owned vertex, the 5×5 tangent projector of the constraints (sphere excepted)."""
         n = self.owned
         gradient = getattr(self, "last_gradient", None)
         basis = projection.tangent_basis_rows(self.rows, self.constraints, gradient)[:n]
-        blocks = np.einsum("nik,njk->nij", basis, basis)
-        index_map = self.q.function_space.dofmap.index_map
-        comm = self.constraints.comm
-        return (
-            _block_diagonal(blocks, index_map, comm),
-            _block_diagonal(np.eye(5) - blocks, index_map, comm),
-        )
+        return np.einsum("nik,njk->nij", basis, basis)
 
     def energy(self) -> float:
         return self.q.function_space.mesh.comm.allreduce(
@@ -161,17 +155,25 @@ class FrameProblem:
         g.getArray()[:] = (dh - along * x).ravel()
 
 
-def _block_diagonal(blocks: np.ndarray, index_map, comm) -> PETSc.Mat:
-    """PETSc AIJ matrix (block size 5) with the (n, 5, 5) ``blocks`` on the owned diagonal."""
+def _block_diagonal(blocks: np.ndarray, index_map, comm, result=None) -> PETSc.Mat:
+    """PETSc AIJ matrix (block size 5) with the (n, 5, 5) ``blocks`` on the owned diagonal.
+
+    With ``result`` (made by an earlier call) its values are replaced in place: PtAP
+    with reuse in parallel needs the same P object every time.
+    """
     n = blocks.shape[0]
     first = index_map.local_range[0]
     size = (5 * n, 5 * index_map.size_global)
     cols = 5 * (first + np.arange(n))[:, None, None] + np.arange(5)[None, None, :]
     indices = np.broadcast_to(cols, (n, 5, 5)).astype(PETSc.IntType).ravel()
     indptr = np.arange(0, 25 * n + 1, 5, dtype=PETSc.IntType)
-    return PETSc.Mat().createAIJ(
-        size=(size, size), bsize=5, csr=(indptr, indices, blocks.ravel()), comm=comm
-    )
+    if result is None:
+        return PETSc.Mat().createAIJ(
+            size=(size, size), bsize=5, csr=(indptr, indices, blocks.ravel()), comm=comm
+        )
+    result.setValuesCSR(indptr, indices, blocks.ravel())
+    result.assemble()
+    return result
 
 
 def frame_problem(
@@ -295,16 +297,21 @@ class GaussNewtonModel:
         ratio = min(1.0, gnorm / self.gnorm0)
         self.lam = self.damping * max(self.damping_min, ratio) * scale
         G.axpy(self.lam, self.sobolev, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        tangent, normal = problem.tangent_projectors()
+        blocks = problem.tangent_blocks()
+        index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
+        self.tangent = _block_diagonal(blocks, index_map, comm, getattr(self, "tangent", None))
+        self.normal = _block_diagonal(
+            np.eye(5) - blocks, index_map, comm, getattr(self, "normal", None)
+        )
         if result is None:
-            result = G.PtAP(tangent)
+            result = G.PtAP(self.tangent)
         else:
-            G.PtAP(tangent, result=result)
-        diagonal, dofs = result.getDiagonal(), tangent.getDiagonal()
+            G.PtAP(self.tangent, result=result)
+        diagonal, dofs = result.getDiagonal(), self.tangent.getDiagonal()
         self.mu = diagonal.sum() / max(dofs.sum(), 1.0)
-        result.axpy(self.mu, normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        for obj in (tangent, normal, diagonal, dofs):
-            obj.destroy()
+        result.axpy(self.mu, self.normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        diagonal.destroy()
+        dofs.destroy()
         problem.write_x(self.xhat)
         self.xhat.normalize()
         self.shift_value = 0.0
@@ -330,7 +337,7 @@ class GaussNewtonModel:
     def free(self):
         """Destroy the PETSc objects (not named ``destroy``: MatPython calls that one)."""
         for obj in (self.shell, self.assembled, self.gauss_newton, self.sobolev, self.unscale,
-                    self.xhat, self.work):
+                    self.xhat, self.work, self.tangent, self.normal):
             obj.destroy()
 
 
