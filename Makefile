@@ -7,6 +7,9 @@ PY      := $(VENV)/bin/python
 MPIRUN  := $(VENV)/bin/mpirun
 NP      ?= 2
 STAMP   := $(VENV)/.installed
+# One BLAS thread per process: the suite runs two MPI ranks on small dense problems.
+export OMP_NUM_THREADS ?= 1
+export OPENBLAS_NUM_THREADS ?= 1
 
 .PHONY: install demo test test-serial test-mpi bench lint clean
 
