@@ -52,7 +52,7 @@ import ufl  # noqa: E402
 
 from ufl_frames import energy, projection  # noqa: E402
 
-#: TAO defaults of the note's projected gradient method (overridable from the command line).
+#: TAO defaults (each overridable from the command line).
 DEFAULT_OPTIONS = {
     "tao_type": "nls",  # Riemannian Gauss–Newton (GaussNewtonModel); the note's method: bncg
     "tao_gatol": 1e-12,
@@ -91,9 +91,10 @@ class FrameProblem:
     integrability: fem.Form
     gradient: fem.Form
     dirichlet: fem.Form
-    gauss_newton: fem.Form
     norm2: float
     sqrt_mass: np.ndarray = field(repr=False)
+    #: The last assembled dH/dq, scaled (local rows): decides the active aspect bounds.
+    last_gradient: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def rows(self) -> np.ndarray:
@@ -124,8 +125,8 @@ class FrameProblem:
     def tangent_blocks(self) -> np.ndarray:
         """Per owned vertex, the 5×5 tangent projector of the constraints (sphere excepted)."""
         n = self.owned
-        gradient = getattr(self, "last_gradient", None)
-        basis = projection.tangent_basis_rows(self.rows, self.constraints, gradient)[:n]
+        basis = projection.tangent_basis_rows(self.rows, self.constraints, self.last_gradient)
+        basis = basis[:n]
         return np.einsum("nik,njk->nij", basis, basis)
 
     def energy(self) -> float:
@@ -145,7 +146,7 @@ class FrameProblem:
         b.scatter_reverse(dolfinx.la.InsertMode.add)
         # Ghost rows of b are partial sums: projected along (pointwise), then dropped.
         dh = b.array.reshape(-1, 5) / self.sqrt_mass[:, None]
-        self.last_gradient = dh  # decides the active aspect bounds of the Hessian too
+        self.last_gradient = dh
         dh = projection.tangent_project_rows(self.rows, dh, self.constraints)[:n]
         x = self.rows[:n] * self.sqrt_mass[:n, None]
         comm = self.constraints.comm
@@ -200,7 +201,6 @@ def frame_problem(
         integrability=fem.form(H),
         gradient=fem.form(energy.gradient_form(H, q)),
         dirichlet=fem.form(energy.dirichlet_energy_form(q)),
-        gauss_newton=fem.form(energy.gauss_newton_form(q)),
         norm2=1.0,
         sqrt_mass=np.sqrt(constraints.weights),
     )
@@ -266,7 +266,8 @@ class GaussNewtonModel:
     def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0,
                  damping_min: float = 1e-3):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
-        self.gauss_newton = dolfinx.fem.petsc.create_matrix(problem.gauss_newton)
+        self.form = fem.form(energy.gauss_newton_form(problem.q))
+        self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
         self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], 5)
         V = problem.q.function_space
@@ -285,7 +286,7 @@ class GaussNewtonModel:
     def _assemble(self, result, gnorm):
         problem, G = self.problem, self.gauss_newton
         G.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(G, problem.gauss_newton)
+        dolfinx.fem.petsc.assemble_matrix(G, self.form)
         G.assemble()
         G.diagonalScale(self.unscale, self.unscale)
         if self.gnorm0 is None:
