@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 	@test -n "$(PYTHON)" || { echo "error: no Python >= 3.12 found; pass PYTHON=/path/to/python3.12" >&2; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dolfinx,test]"
+	$(PY) -m pip install --quiet -e ".[dolfinx,test,dev]"
 	@touch $(STAMP)
 
 # The main job: integrable frame field on the built-in 'piano' geometry.

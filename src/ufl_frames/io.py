@@ -357,6 +357,10 @@ def _draw_frames(path, points, rows, spacing, boundary, title, singularities, is
     ax.add_collection(LineCollection(boundary, colors="0.15", linewidths=1.0, zorder=1))
     glyphs = LineCollection(segments, cmap="viridis", linewidths=1.3, capstyle="round", zorder=2)
     glyphs.set_array(colours)
+    # A uniform field (an MBO field has unit lengths) gets a readable colour range.
+    low, high = float(colours.min()), float(colours.max())
+    middle, half = (low + high) / 2, max((high - low) / 2, 0.05 * abs(high + low) / 2, 1e-12)
+    glyphs.set_clim(middle - half, middle + half)
     ax.add_collection(glyphs)
     _mark_singularities(ax, singularities)
     bar = fig.colorbar(glyphs, ax=ax, shrink=0.85, pad=0.02)

@@ -211,7 +211,12 @@ def frame_problem(
 
 @dataclass
 class SolveResult:
-    """Outcome of :func:`solve`: the history has one entry per iteration (0 = initial)."""
+    """Outcome of :func:`solve`.
+
+    ``history`` has one entry per TAO monitor call: the initial state, then one per
+    step. ``iterations`` counts those steps; it can exceed TAO's own count by one
+    (``nls`` and ``bncg`` take a first step that TAO numbers 0 again).
+    """
 
     history: list[dict]
     converged_reason: str
