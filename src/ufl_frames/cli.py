@@ -442,15 +442,14 @@ def versions() -> dict:
     """Versions of the libraries in use (PETSc initialised first)."""
     init_petsc()
     import basix
+    import dolfinx
+    import dolfinx.io
     import ffcx
     import gmsh
     import numpy
+    import ufl
     from mpi4py import MPI
     from petsc4py import PETSc
-
-    import dolfinx
-    import dolfinx.io
-    import ufl
 
     petsc = ".".join(str(v) for v in PETSc.Sys.getVersion())
     return {

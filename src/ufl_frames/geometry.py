@@ -44,11 +44,10 @@ from ufl_frames.bootstrap import init_petsc
 
 init_petsc()
 
-import gmsh  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
 import dolfinx  # noqa: E402
 import dolfinx.io.gmsh  # noqa: E402
+import gmsh  # noqa: E402
+from mpi4py import MPI  # noqa: E402
 
 __all__ = ["GeometryError", "KNOWN_GEOMETRIES", "annulus", "build", "load", "piano"]
 

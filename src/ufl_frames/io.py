@@ -20,14 +20,13 @@ from ufl_frames.bootstrap import init_petsc
 
 init_petsc()
 
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
 import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
 import dolfinx.geometry  # noqa: E402
 import dolfinx.io  # noqa: E402
+import numpy as np  # noqa: E402
 import ufl  # noqa: E402
+from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import energy, odeco  # noqa: E402
 

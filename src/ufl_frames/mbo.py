@@ -25,14 +25,13 @@ from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-from petsc4py import PETSc  # noqa: E402
-
 import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
 import dolfinx.fem.petsc  # noqa: E402, F401
+import numpy as np  # noqa: E402
 import ufl  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames import odeco, projection  # noqa: E402
 

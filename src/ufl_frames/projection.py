@@ -18,12 +18,11 @@ from ufl_frames.bootstrap import init_petsc
 
 init_petsc()
 
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-
 import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
+import numpy as np  # noqa: E402
 import ufl  # noqa: E402
+from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import odeco  # noqa: E402
 

@@ -41,14 +41,13 @@ from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
-import numpy as np  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-from petsc4py import PETSc  # noqa: E402
-
 import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
 import dolfinx.fem.petsc  # noqa: E402, F401
+import numpy as np  # noqa: E402
 import ufl  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames import energy, projection  # noqa: E402
 
@@ -359,7 +358,6 @@ def solve(
     ``max_it`` is a default for ``-tao_max_it`` (the command line wins). ``monitor``
     receives each history entry ``{"it", "H", "E", "gnorm", "step"}`` (on every rank).
     """
-    comm = problem.constraints.comm
     options = {**DEFAULT_OPTIONS, **(defaults or {})}
     tao_type = PETSc.Options(options_prefix).getString("tao_type", options["tao_type"])
     options.update(TYPE_OPTIONS.get(tao_type, {}))
