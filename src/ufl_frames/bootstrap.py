@@ -8,7 +8,9 @@ MPI library that petsc4py links against. Conda-forge and Docker installs have no
 ``dolfinx_solver`` and need nothing extra.
 
 Every module of this package that imports DOLFINx calls :func:`init_petsc` at
-import time; scripts call it themselves, first, to pass their ``argv``.
+import time, without options; scripts and entry points call it themselves, first,
+with their ``argv``, so that PETSc reads the command line (a library import must not
+parse the command line of whatever program imported it, pytest's for instance).
 """
 
 import sys
@@ -18,7 +20,7 @@ _initialised = False
 
 
 def init_petsc(argv: list[str] | None = None) -> None:
-    """Initialise petsc4py with ``argv`` (default ``sys.argv``) once per process."""
+    """Initialise petsc4py with ``argv`` (default: no options) once per process."""
     global _initialised
     if _initialised:
         return
@@ -28,7 +30,7 @@ def init_petsc(argv: list[str] | None = None) -> None:
         pass
     import petsc4py
 
-    petsc4py.init(sys.argv if argv is None else argv)
+    petsc4py.init([] if argv is None else argv)
     _initialised = True
 
 
