@@ -93,99 +93,108 @@ def test_isotropic_annulus_from_mbo(annulus_mesh):
     assert max_angle < 0.05
 
 
-def test_nonisotropic_annulus_tangential_length(annulus_mesh):
+@pytest.mark.parametrize(
+    "tao_type, max_it",
+    [
+        ("bncg", 60),  # the note's projected steepest descent
+        pytest.param(
+            "nls", 100,  # the default, Gauss–Newton
+            marks=pytest.mark.xfail(
+                reason="measured: nls converges (CONVERGED_GTTOL, H -> 0 at O(h^2)) to a "
+                "non-polar integrable field, angle off e_r by ~0.012 rad at every h, tangential "
+                "R^2 = 0.976 / 0.984 / 0.973 at h = 0.1 / 0.05 / 0.025 (not improving)",
+                strict=False,
+            ),
+        ),
+    ],
+)
+def test_nonisotropic_annulus_tangential_length(annulus_mesh, tao_type, max_it):
+    """Non-isotropic integrable fields are not unique: (g(r) e_r, c r e_θ) for any g, and
+    other orthogonal nets with the two circles as coordinate lines. Only the polar ones
+    have tangential length c r; the note's method from MBO stays in that family."""
     comm = MPI.COMM_WORLD
     problem = mbo_problem(annulus_mesh, 0.1, isotropic=False)
     H0 = problem.energy()
-    result = solver.solve(problem, max_it=60, options_prefix="noniso_")
+    result = solver.solve(
+        problem, max_it=max_it, options_prefix="noniso_", defaults={"tao_type": tao_type}
+    )
     check_reason(result)
     H = result.H_final
     r, radial, tangential, angle_error = radial_and_tangential(problem)
     slope, r2 = fit_through_origin(comm, r, tangential)
     _, r2_radial = fit_through_origin(comm, r, radial)
+    max_angle = global_max(comm, angle_error)
     if comm.rank == 0:
-        print(f"\nnon-isotropic annulus h = 0.1: H {H0:.4f} -> {H:.3e} ({H0 / H:.0f}x) in "
-              f"{result.iterations} iterations; tangential l = {slope:.4f} r with "
-              f"R^2 = {r2:.5f} (radial length: R^2 = {r2_radial:.2f}, free)")
+        print(f"\nnon-isotropic annulus h = 0.1, {tao_type}: H {H0:.4f} -> {H:.3e} "
+              f"({H0 / H:.0f}x) in {result.iterations} iterations ({result.converged_reason}); "
+              f"tangential l = {slope:.4f} r with R^2 = {r2:.5f} (radial length: "
+              f"R^2 = {r2_radial:.2f}, free); max angle error vs e_r {max_angle:.1e}")
     assert H <= H0 / 100
     assert r2 >= 0.99
 
 
 def test_residual_energy_vanishes_under_refinement(annulus_mesh):
-    """Isotropic annulus, L-BFGS (``lmvm``) to a plateau: residual H = O(h²).
+    """Isotropic annulus, default solver to convergence: residual H = O(h²).
 
-    (``lmvm`` reaches the same residual as the Gauss–Newton ``nls`` to 0.1 % here; the
-    three-size study is in ``benchmarks/solver.py --study``.)
+    (The three-size study is ``benchmarks/solver.py --study``.)
     """
     comm = MPI.COMM_WORLD
     sizes, residuals, iterations = [], [], []
     for h in (0.1, 0.05):
         problem = mbo_problem(annulus_mesh, h, isotropic=True)
-        result = solver.solve(
-            problem, max_it=150, options_prefix="refine_", defaults={"tao_type": "lmvm"}
-        )
-        check_reason(result)
+        result = solver.solve(problem, max_it=100, options_prefix="refine_")
+        assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
         cells = problem.q.function_space.mesh.topology.index_map(2).size_global
         sizes.append(1.0 / math.sqrt(cells))
         residuals.append(result.H_final)
         iterations.append(result.iterations)
     rate = math.log(residuals[0] / residuals[1]) / math.log(sizes[0] / sizes[1])
     if comm.rank == 0:
-        print(f"\nresidual H (isotropic, lmvm) at h = 0.1, 0.05: {residuals[0]:.4e}, "
+        print(f"\nresidual H (isotropic) at h = 0.1, 0.05: {residuals[0]:.4e}, "
               f"{residuals[1]:.4e} in {iterations} iterations; rate {rate:.2f}")
     assert rate >= 1.8
 
 
-def test_parallel_history_matches_serial(annulus_mesh):
-    """The same 30 iterations on COMM_SELF and COMM_WORLD (meaningful under mpirun).
+@pytest.mark.parametrize("tao_type", ["nls", "bncg"])
+def test_parallel_history_matches_serial(annulus_mesh, tao_type):
+    """The same iterations on COMM_SELF and COMM_WORLD (meaningful under mpirun).
 
-    The MBO solves are tightened to rtol 1e-12: with MBO's default 1e-10 the initial fields
-    differ by ~6e-12 (GAMG differs in parallel), which 30 steps amplify to ~3e-9.
+    Inner solves are tightened so that the comparison sees the parallel arithmetic, not
+    their tolerances: MBO to rtol 1e-12 (at its default 1e-10 the initial fields differ
+    by ~6e-12 between serial and parallel GAMG, which 30 bncg steps amplify to ~3e-9), and
+    the Gauss–Newton steps of nls to rtol 1e-10 (at the default, even two serial runs in
+    one process differ by ~4e-7: the inexact steps change when a KSP iteration count does).
     """
-    PETSc.Options()["exact_mbo_ksp_rtol"] = 1e-12  # removed by the conftest fixture
+    opts = PETSc.Options()
+    opts["exact_mbo_ksp_rtol"] = 1e-12  # both removed by the conftest fixture
+    opts["self_tao_nls_ksp_rtol"] = opts["world_tao_nls_ksp_rtol"] = 1e-10
     histories = {}
     for name, comm in (("self", MPI.COMM_SELF), ("world", MPI.COMM_WORLD)):
         problem = mbo_problem(annulus_mesh, 0.1, True, comm=comm, mbo_prefix="exact_mbo_")
-        result = solver.solve(problem, max_it=30, options_prefix=f"{name}_")
+        result = solver.solve(
+            problem, max_it=30, options_prefix=f"{name}_", defaults={"tao_type": tao_type}
+        )
         histories[name] = np.array([[e["H"], e["E"]] for e in result.history])
         assert problem.energy() == pytest.approx(result.H_final, rel=1e-12)
     serial, parallel = histories["self"], histories["world"]
     assert serial.shape == parallel.shape
     worst = np.max(np.abs(parallel - serial) / np.abs(serial))
     if MPI.COMM_WORLD.rank == 0:
-        print(f"\n{len(serial)} history entries, COMM_SELF vs COMM_WORLD "
+        print(f"\n{tao_type}: {len(serial)} history entries, COMM_SELF vs COMM_WORLD "
               f"(size {MPI.COMM_WORLD.size}): worst relative difference of H, E {worst:.1e}")
     assert worst < 1e-8
 
 
-def test_gauss_newton_parallel_matches_serial(annulus_mesh):
-    """The Gauss–Newton path (``nls``, a PETSc Hessian) on COMM_SELF and COMM_WORLD."""
-    finals = {}
-    for name, comm in (("self", MPI.COMM_SELF), ("world", MPI.COMM_WORLD)):
-        problem = mbo_problem(annulus_mesh, 0.1, isotropic=True, comm=comm)
-        result = solver.solve(
-            problem, max_it=40, options_prefix=f"gn_{name}_", defaults={"tao_type": "nls"}
-        )
-        assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
-        finals[name] = result.H_final
-    if MPI.COMM_WORLD.rank == 0:
-        print(f"\nnls converged H on COMM_SELF {finals['self']:.10e}, "
-              f"on COMM_WORLD (size {MPI.COMM_WORLD.size}) {finals['world']:.10e}")
-    assert finals["world"] == pytest.approx(finals["self"], rel=1e-6)
-
-
 def test_tao_options_are_honoured(annulus_mesh):
-    """Options in the database win over solve()'s defaults, with and without a prefix."""
+    """Options in the database win over solve()'s arguments, with and without a prefix."""
     problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
     q0 = problem.q.x.array.copy()
     opts = PETSc.Options()
     try:
         opts["tao_max_it"] = 3
-        result = solver.solve(problem, max_it=30)
-        # bncg reports iteration 0 twice (after its first step), so the history may hold
-        # one more step than TAO's own count.
+        result = solver.solve(problem, max_it=30, defaults={"tao_type": "lmvm"})
         assert result.converged_reason == "DIVERGED_MAXITS"
-        assert result.iterations in (3, 4)
+        assert result.iterations == 3
 
         problem.q.x.array[:] = q0
         opts["opt_tao_type"] = "lmvm"
@@ -205,15 +214,13 @@ def test_tao_options_are_honoured(annulus_mesh):
     assert not opts.hasName("tao_max_it")
 
 
-@pytest.mark.xfail(
-    reason="solver.solve leaves its defaults (tao_max_it, tao_type, ...) in the global PETSc "
-    "options database, where they look user-given to the next solve() with the same prefix",
-    strict=False,
-)
-def test_max_it_of_a_later_solve_is_honoured(annulus_mesh):
+def test_defaults_of_one_solve_do_not_leak_into_the_next(annulus_mesh):
+    """solve() removes the defaults it set: a later max_it / TAO type is honoured."""
     problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
     q0 = problem.q.x.array.copy()
-    solver.solve(problem, max_it=2, options_prefix="twice_")
+    before = PETSc.Options().getAll()
+    solver.solve(problem, max_it=2, options_prefix="twice_", defaults={"tao_type": "lmvm"})
+    assert PETSc.Options().getAll() == before
     problem.q.x.array[:] = q0
-    result = solver.solve(problem, max_it=8, options_prefix="twice_")
-    assert result.iterations >= 8
+    result = solver.solve(problem, max_it=4, options_prefix="twice_", defaults={"tao_type": "lmvm"})
+    assert result.iterations == 4
