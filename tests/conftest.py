@@ -22,12 +22,11 @@ from ufl_frames.bootstrap import init_petsc
 # pytest's own command line (-q, -m "not serial", -k ...) is not for PETSc.
 init_petsc(sys.argv[:1])
 
+import dolfinx  # noqa: E402
+import dolfinx.io.gmsh  # noqa: E402
 import pytest  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
-
-import dolfinx  # noqa: E402
-import dolfinx.io.gmsh  # noqa: E402
 
 R_INNER = 0.5
 R_OUTER = 1.0

@@ -22,13 +22,12 @@ O(h²) area error). Rates are printed (``pytest -s``).
 
 import math
 
-import numpy as np
-import pytest
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.fem as fem
+import numpy as np
+import pytest
 import ufl
+from mpi4py import MPI
 
 from ufl_frames import energy, odeco
 from ufl_frames.bracket import BRACKET_TENSOR
@@ -219,8 +218,11 @@ def test_test_fields_are_integrable(f, lo, hi):
 
 
 @pytest.mark.parametrize(
-    "name, f", [("(g e_r, c r e_theta)", annulus_integrable),
-                ("(c r e_r, c r e_theta)", annulus_integrable_isotropic)]
+    "name, f",
+    [
+        ("(g e_r, c r e_theta)", annulus_integrable),
+        ("(c r e_r, c r e_theta)", annulus_integrable_isotropic),
+    ],
 )
 def test_annulus_integrable_fields_energy_vanishes(annulus_meshes, name, f):
     hs, energies = energy_study(annulus_meshes, f)
@@ -364,8 +366,10 @@ def test_minimum_norm_bracket_gives_smaller_residual(annulus_meshes, name, f):
         alpha.value[:] = value
         perturbed.append(energy.assemble_energy(H))
     if MPI.COMM_WORLD.rank == 0:
-        print(f"\n{name}, h = 0.05: residual H with minimum-norm C {H_min:.3e}; "
-              f"with C + null element (|dC| = |C|/2): {['%.3e' % p for p in perturbed]}")
+        print(
+            f"\n{name}, h = 0.05: residual H with minimum-norm C {H_min:.3e}; "
+            f"with C + null element (|dC| = |C|/2): {['%.3e' % p for p in perturbed]}"
+        )
     assert min(perturbed) > H_min
 
 

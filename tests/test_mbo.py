@@ -54,8 +54,10 @@ def test_mbo_annulus_frames(annulus_mesh):
         errors[h] = global_max(comm, angle_mod_quarter(t - phi))
         H, E = energy.integrability_energy(q), energy.dirichlet_energy(q)
         if comm.rank == 0:
-            print(f"\nMBO annulus h = {h}: max angle error vs e_r {errors[h]:.2e} rad "
-                  f"(boundary {boundary_error:.2e}), H = {H:.6f}, E = {E:.6f}")
+            print(
+                f"\nMBO annulus h = {h}: max angle error vs e_r {errors[h]:.2e} rad "
+                f"(boundary {boundary_error:.2e}), H = {H:.6f}, E = {E:.6f}"
+            )
     assert errors[0.05] < 5e-3
     assert errors[0.05] < errors[0.1] / 2
 
@@ -67,6 +69,8 @@ def test_mbo_parallel_matches_serial(annulus_mesh):
         _, _, q = mbo_on_annulus(annulus_mesh, 0.1, comm)
         energies[name] = (energy.integrability_energy(q), energy.dirichlet_energy(q))
     if MPI.COMM_WORLD.rank == 0:
-        print(f"\nMBO H, E on COMM_SELF {energies['self']}, "
-              f"on COMM_WORLD (size {MPI.COMM_WORLD.size}) {energies['world']}")
+        print(
+            f"\nMBO H, E on COMM_SELF {energies['self']}, "
+            f"on COMM_WORLD (size {MPI.COMM_WORLD.size}) {energies['world']}"
+        )
     assert energies["world"] == pytest.approx(energies["self"], rel=1e-8)
