@@ -15,7 +15,13 @@ that module is not available.
 """
 
 import gc
+import os
 import sys
+
+# One BLAS thread per process, as in the Makefile (effective if NumPy is not loaded yet):
+# threaded OpenBLAS makes small dot products ~1000x slower on a loaded machine.
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 
 from ufl_frames.bootstrap import init_petsc
 
