@@ -221,14 +221,23 @@ def _tangent_basis_rows(q, max_aspect, gradient):
         kappa = _aspect_kappa(max_aspect)
         sign = np.where(d < 0, -1.0, 1.0)
         at_bound = np.abs(d) >= kappa * s * (1 - 1e-9)
-        # Descent −g moves d outwards when sign · (g · e_d) < 0.
-        outwards = sign * np.einsum("ni,ni->n", gradient, e_d) <= 0
-        active = (at_bound & outwards)[:, None]
+        active = (at_bound & _descent_leaves_bound(gradient, e_s, e_d, sign, kappa))[:, None]
         e_s = np.where(active, e_s + (sign * kappa)[:, None] * e_d, e_s)
         e_d = np.where(active, 0.0, e_d)
     basis = np.stack([e_s, e_d, dq_dt], axis=2)
     norm = np.linalg.norm(basis, axis=1, keepdims=True)
     return basis / np.where(norm > 0, norm, 1.0)
+
+
+def _descent_leaves_bound(gradient, e_s, e_d, sign, kappa) -> np.ndarray:
+    """Whether the steepest descent −g of frames at the bound |d| = κ s points outside it.
+
+    Along −g, Δs = −g·e_s/|e_s|² and Δd = −g·e_d/|e_d|²; the bound sign·d − κ s ≤ 0
+    is violated to first order when sign·Δd − κ Δs > 0 (e_s, e_d unnormalised).
+    """
+    ds = -np.einsum("ni,ni->n", gradient, e_s) / _ES_NORM2
+    dd = -np.einsum("ni,ni->n", gradient, e_d) / _ED_NORM2
+    return sign * dd - kappa * ds >= 0
 
 
 def _aspect_kappa(max_aspect: float) -> float:

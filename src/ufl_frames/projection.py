@@ -184,7 +184,7 @@ def tangent_basis_rows(
             sign = np.where(d_len < 0, -1.0, 1.0)
             g = np.zeros((b.size, 5)) if gradient is None else gradient[b]
             active = (np.abs(d_len) >= kappa * s_len * (1 - 1e-9)) & (
-                sign * np.einsum("ni,ni->n", g, e_d) <= 0
+                odeco._descent_leaves_bound(g, e_s, e_d, sign, kappa)
             )
             e_s = np.where(active[:, None], e_s + (sign * kappa)[:, None] * e_d, e_s)
             e_d = np.where(active[:, None], 0.0, e_d)
