@@ -34,8 +34,16 @@ def plane(q):
     """e_s, e_d (N, 5) of the frames at the angle of the Odeco tensors ``q`` (arg C = 4t)."""
     theta = np.arctan2(q[:, 4], q[:, 3])
     zero = np.zeros_like(theta)
-    e_s = np.stack([np.full_like(theta, 3 * odeco.SQRT2 / 8), zero, zero,
-                    np.cos(theta) / 8, np.sin(theta) / 8], axis=1)
+    e_s = np.stack(
+        [
+            np.full_like(theta, 3 * odeco.SQRT2 / 8),
+            zero,
+            zero,
+            np.cos(theta) / 8,
+            np.sin(theta) / 8,
+        ],
+        axis=1,
+    )
     e_d = np.stack([zero, np.cos(theta / 2) / 2, np.sin(theta / 2) / 2, zero, zero], axis=1)
     return e_s, e_d
 
@@ -136,7 +144,7 @@ def test_project_leaves_frames_inside_the_bound_unchanged(aspect):
     ratio = np.exp(rng.uniform(-1.0, 1.0, n) * np.log(aspect))
     lengths = np.stack([np.ones(n), ratio], axis=1) * rng.uniform(0.5, 2.0, (n, 1))
     q = odeco.frames_to_q(lengths, rng.uniform(-np.pi, np.pi, n))
-    q[n // 2:] += 1e-6 * rng.standard_normal((n - n // 2, 5))  # near-Odeco too
+    q[n // 2 :] += 1e-6 * rng.standard_normal((n - n // 2, 5))  # near-Odeco too
     free = odeco.project(q)
     lo, hi = aspect_of(free)
     inside = hi <= aspect * lo * (1 - 1e-9)
@@ -182,8 +190,9 @@ def test_project_with_bound_is_idempotent(aspect):
 def test_isotropic_projection_ignores_the_bound():
     rng = np.random.default_rng(7)
     q = random_q(rng, 200)
-    assert np.array_equal(odeco.project(q, isotropic=True, max_aspect=2.0),
-                          odeco.project(q, isotropic=True))
+    assert np.array_equal(
+        odeco.project(q, isotropic=True, max_aspect=2.0), odeco.project(q, isotropic=True)
+    )
 
 
 def test_project_rejects_bad_bounds():
@@ -234,7 +243,7 @@ def frames_on_bound(rng, n, aspect):
     """Frames with l_max/l_min = aspect, half with d > 0 (l1 long), half with d < 0."""
     lengths = np.ones((n, 2))
     lengths[: n // 2, 0] = aspect
-    lengths[n // 2:, 1] = aspect
+    lengths[n // 2 :, 1] = aspect
     lengths *= rng.uniform(0.5, 2.0, (n, 1))
     return odeco.frames_to_q(lengths, rng.uniform(-np.pi, np.pi, n))
 

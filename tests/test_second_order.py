@@ -37,14 +37,13 @@ The solver minimises f(x) = H(R(x)) over the scaled unknowns x = √m q, R the r
 Fields live on ``MPI.COMM_WORLD``: everything here also runs under ``mpirun -n 2``.
 """
 
-import numpy as np
-import pytest
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.fem as fem
 import dolfinx.fem.petsc  # noqa: F401
+import numpy as np
+import pytest
 import ufl
+from mpi4py import MPI
 
 from ufl_frames import energy, geometry, mbo, odeco, projection, solver
 
@@ -86,8 +85,16 @@ def random_tangent(problem, x, seed):
 def smooth_tangent(problem, x, phase=0.0):
     """A smooth tangent direction (rotation and length changes varying over the domain)."""
     p = problem.q.function_space.tabulate_dof_coordinates()[:, :2].T
-    rows = np.stack([np.sin(2 * p[0] + 1 + phase) * np.cos(3 * p[1]), np.cos(2 * p[1] - phase),
-                     np.sin(3 * p[0] * p[1]), np.cos(p[0] + phase), np.sin(4 * p[1])], axis=1)
+    rows = np.stack(
+        [
+            np.sin(2 * p[0] + 1 + phase) * np.cos(3 * p[1]),
+            np.cos(2 * p[1] - phase),
+            np.sin(3 * p[0] * p[1]),
+            np.cos(p[0] + phase),
+            np.sin(4 * p[1]),
+        ],
+        axis=1,
+    )
     d = tangent(problem, rows, x)
     d.scale(1.0 / d.norm())
     return d
@@ -113,8 +120,9 @@ def gradient_at(problem, x):
 
 def second_difference(func, eps):
     """f''(0) by the five-point stencil: error O(ε⁴), exact for polynomials of degree 5."""
-    return (-func(2 * eps) + 16 * func(eps) - 30 * func(0.0) + 16 * func(-eps)
-            - func(-2 * eps)) / (12 * eps**2)
+    return (-func(2 * eps) + 16 * func(eps) - 30 * func(0.0) + 16 * func(-eps) - func(-2 * eps)) / (
+        12 * eps**2
+    )
 
 
 def gauss_newton(problem, x):
@@ -134,8 +142,9 @@ def constant_field(comm, isotropic, cells=8):
     mesh = dolfinx.mesh.create_unit_square(comm, cells, cells)
     q = fem.Function(energy.frame_space(mesh))
     lengths = [[1.0, 1.0]] if isotropic else [[2.0, 1.0]]
-    q.x.array[:] = np.tile(odeco.frames_to_q(np.array(lengths), np.zeros(1)), (q.x.array.size
-                                                                               // 5, 1)).ravel()
+    q.x.array[:] = np.tile(
+        odeco.frames_to_q(np.array(lengths), np.zeros(1)), (q.x.array.size // 5, 1)
+    ).ravel()
     return solver.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
 
 
@@ -179,8 +188,9 @@ def test_riemannian_gradient_matches_central_differences(name, isotropic):
     """g·d = d/dε H(R(x + εd)) on the MBO field (the piano: with pinned singular triangles)."""
     mesh = geometry.build(COMM, name, 0.2)
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
-    problem = solver.frame_problem(q, isotropic=isotropic, pin_singularities=True,
-                                   max_aspect=None if isotropic else 4.0)
+    problem = solver.frame_problem(
+        q, isotropic=isotropic, pin_singularities=True, max_aspect=None if isotropic else 4.0
+    )
     x = scaled_x(problem)
     g = gradient_at(problem, x)
     for seed in range(3):
@@ -191,8 +201,10 @@ def test_riemannian_gradient_matches_central_differences(name, isotropic):
             fd = (f_along(problem, x, d, eps) - f_along(problem, x, d, -eps)) / (2 * eps)
             errors.append(abs(fd - exact) / abs(exact))
         if COMM.rank == 0:
-            print(f"\n{name} isotropic={isotropic}: g.d = {exact:+.10e}, relative error of the "
-                  f"central difference at eps 1e-3, 1e-5: {errors[0]:.1e}, {errors[1]:.1e}")
+            print(
+                f"\n{name} isotropic={isotropic}: g.d = {exact:+.10e}, relative error of the "
+                f"central difference at eps 1e-3, 1e-5: {errors[0]:.1e}, {errors[1]:.1e}"
+            )
         assert errors[1] < 1e-6
         assert errors[1] < 1e-2 * errors[0]  # O(ε²): the error is truncation, not a mismatch
 
@@ -205,8 +217,9 @@ def residual_term(problem, d):
     q = problem.q
     delta = fem.Function(q.function_space)
     n = problem.owned
-    delta.x.array[: 5 * n] = (d.getArray(readonly=True).reshape(-1, 5)
-                              / problem.sqrt_mass[:n, None]).ravel()
+    delta.x.array[: 5 * n] = (
+        d.getArray(readonly=True).reshape(-1, 5) / problem.sqrt_mass[:n, None]
+    ).ravel()
     delta.x.scatter_forward()
     form = fem.form(2 * ufl.inner(energy.lie_bracket(q), energy.lie_bracket(delta)) * ufl.dx)
     return COMM.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
@@ -218,8 +231,9 @@ def straight_line_second_derivative(problem, x, d, eps=1e-2):
     base = problem.rows.copy()
 
     def H(t):
-        problem.rows[:n] = ((x.getArray(readonly=True) + t * d.getArray(readonly=True))
-                            .reshape(-1, 5) / problem.sqrt_mass[:n, None])
+        problem.rows[:n] = (x.getArray(readonly=True) + t * d.getArray(readonly=True)).reshape(
+            -1, 5
+        ) / problem.sqrt_mass[:n, None]
         problem.q.x.scatter_forward()
         return problem.energy()
 
@@ -244,8 +258,10 @@ def test_gauss_newton_is_the_exact_jtj(field, annulus_solution):
         line = straight_line_second_derivative(problem, x, d)
         rest = residual_term(problem, d)
         if COMM.rank == 0:
-            print(f"\n{field}: d.Bd = {dBd:.10e}, H''(line) - residual term = {line - rest:.10e}"
-                  f" (residual term / d.Bd = {rest / dBd:+.1e})")
+            print(
+                f"\n{field}: d.Bd = {dBd:.10e}, H''(line) - residual term = {line - rest:.10e}"
+                f" (residual term / d.Bd = {rest / dBd:+.1e})"
+            )
         assert line - rest == pytest.approx(dBd, rel=1e-8)
     model.free()
 
@@ -318,11 +334,15 @@ def test_riemannian_hessian_equals_gauss_newton_on_an_integrable_field(isotropic
         rows.append((s, H, *worst))
         model.free()
     if COMM.rank == 0:
-        print(f"\nconstant {'isotropic' if isotropic else 'non-isotropic'} frames on the square,"
-              " moved by s:")
+        print(
+            f"\nconstant {'isotropic' if isotropic else 'non-isotropic'} frames on the square,"
+            " moved by s:"
+        )
         for s, H, e2, eg in rows:
-            print(f"  s = {s:5.3f}  H = {H:.2e}  |f'' - dBd|/dBd = {e2:.1e}  "
-                  f"|P Dg[d] - Bd|/|Bd| = {eg:.1e}")
+            print(
+                f"  s = {s:5.3f}  H = {H:.2e}  |f'' - dBd|/dBd = {e2:.1e}  "
+                f"|P Dg[d] - Bd|/|Bd| = {eg:.1e}"
+            )
     (_, _, e2_0, eg_0), *moved_rows = rows
     assert e2_0 < 1e-6 and eg_0 < 1e-6  # exact where r = 0
     discrepancies = np.array([r[2:] for r in moved_rows])  # s = 0.01, 0.02, 0.04
@@ -341,13 +361,18 @@ def test_riemannian_hessian_near_gauss_newton_at_the_annulus_solution(annulus_so
     x = scaled_x(problem)
     model = gauss_newton(problem, x)
     worst = np.zeros(2)
-    for d in (random_tangent(problem, x, 1), random_tangent(problem, x, 2),
-              smooth_tangent(problem, x)):
+    for d in (
+        random_tangent(problem, x, 1),
+        random_tangent(problem, x, 2),
+        smooth_tangent(problem, x),
+    ):
         worst = np.maximum(worst, riemannian_discrepancies(problem, x, d, model))
     model.free()
     if COMM.rank == 0:
-        print(f"\nannulus h = 0.1, H = {result.H_final:.3e}: |f'' - dBd|/dBd = {worst[0]:.1e}, "
-              f"|P Dg[d] - Bd|/|Bd| = {worst[1]:.1e}")
+        print(
+            f"\nannulus h = 0.1, H = {result.H_final:.3e}: |f'' - dBd|/dBd = {worst[0]:.1e}, "
+            f"|P Dg[d] - Bd|/|Bd| = {worst[1]:.1e}"
+        )
     assert worst[0] < 1e-2 and worst[1] < 1e-2
 
 
@@ -366,15 +391,18 @@ def test_default_method_converges_superlinearly(annulus_solution):
     tail = [k for k in range(k0, len(H) - 1) if error[k + 1] > 1e-13 * result.H_final]
     ratios = np.array([error[k + 1] / error[k] for k in tail])
     if COMM.rank == 0:
-        print(f"\nnls, isotropic annulus h = 0.1 ({result.iterations} its, "
-              f"{result.converged_reason}): e_k = H_k - H_final from k = {k0} "
-              f"(|g|/|g0| < 1e-2):")
+        print(
+            f"\nnls, isotropic annulus h = 0.1 ({result.iterations} its, "
+            f"{result.converged_reason}): e_k = H_k - H_final from k = {k0} "
+            f"(|g|/|g0| < 1e-2):"
+        )
         for k in range(k0, len(H)):
             line = f"  k = {k:2d}  e = {error[k]:.3e}  |g|/|g0| = {rel_grad[k]:.1e}"
             if k + 1 < len(H) and error[k + 1] > 0:
                 # p with e_k+1 = e_k^p (H ~ 1e-3 here, so p < 2 even for quadratic contraction)
-                line += (f"  e_k+1/e_k = {error[k + 1] / error[k]:.2e}"
-                         f"  p = log e_k+1 / log e_k = {np.log(error[k + 1]) / np.log(error[k]):.2f}")
+                p = np.log(error[k + 1]) / np.log(error[k])
+                ratio = error[k + 1] / error[k]
+                line += f"  e_k+1/e_k = {ratio:.2e}  p = log e_k+1 / log e_k = {p:.2f}"
             print(line)
     assert ratios.size >= 2
     assert np.all(np.diff(ratios) < 0), ratios  # the contraction improves: superlinear
@@ -382,7 +410,7 @@ def test_default_method_converges_superlinearly(annulus_solution):
 
 
 def test_default_method_iteration_count_regression(annulus_solution):
-    """Default TAO type (Gauss–Newton ``nls``) on the isotropic annulus, h = 0.1: 13 its measured."""
+    """Default TAO type (Gauss–Newton ``nls``), isotropic annulus, h = 0.1: 13 its measured."""
     problem, result = annulus_solution
     assert solver.DEFAULT_OPTIONS["tao_type"] == "nls"
     assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
