@@ -39,7 +39,8 @@ iteration count of every method changes from h to h/2 (target for the best metho
 ``--replay <out>/convergence.json`` rebuilds the table, summary and figures of an earlier run
 without solving anything. One figure
 per case, ``<out>/convergence_<case>.png``: H against iteration and against wall time for
-all methods, one column per mesh size; ``<out>/convergence.json`` holds every history.
+all methods, and H minus the lowest final H of the case against iteration, one column per
+mesh size; ``<out>/convergence.json`` holds every history.
 """
 
 import argparse
@@ -346,6 +347,11 @@ COLOURS = {
 
 
 def plot(path, name, results, sizes):
+    """H against iteration and wall time (log-log), and H − H_best against iteration.
+
+    H_best is the lowest final H of the case at that size (over all methods): the bottom
+    row shows the convergence to it, which the top rows hide when H levels off far from 0.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -353,33 +359,38 @@ def plot(path, name, results, sizes):
 
     sizes = [h for h in sizes if (name, h) in results]
     fig, axes = plt.subplots(
-        2, len(sizes), figsize=(4.6 * len(sizes), 7.0), squeeze=False, layout="constrained"
+        3, len(sizes), figsize=(4.6 * len(sizes), 10.0), squeeze=False, layout="constrained"
     )
     for col, h in enumerate(sizes):
         runs = results[(name, h)][1]
         ref = next((r for r in runs if r["method"] == REFERENCE), None)
-        for row, key in enumerate(("it", "wall")):
+        best = min(r["H"] for r in runs)
+        for row, key in enumerate(("it", "wall", "gap")):
             ax = axes[row, col]
             for run in runs:
-                x = np.array([e[key] for e in run["history"]], dtype=float)
                 H = np.array([e["H"] for e in run["history"]])
+                x = np.array([e["wall" if key == "wall" else "it"] for e in run["history"]])
+                x = x.astype(float) + (0 if key == "wall" else 1)
+                if key == "gap":
+                    H = H - best
+                    keep = H > 1e-14 * best
+                    x, H = x[keep], H[keep]
+                style = {"marker": ".", "ms": 3} if key == "gap" and x.size < 60 else {}
                 ax.plot(
-                    x + (1 if key == "it" else 0),
-                    H,
-                    lw=1.4,
-                    label=run["method"],
-                    color=COLOURS.get(run["method"]),
+                    x, H, lw=1.4, label=run["method"], color=COLOURS.get(run["method"]), **style
                 )
-            if ref is not None:
+            if ref is not None and key != "gap":
                 ax.axhline(ref["H"], color="k", ls=":", lw=0.8, label=f"{REFERENCE} final H")
+            if ref is not None and key == "gap" and ref["H"] > best:
+                ax.axhline(ref["H"] - best, color="k", ls=":", lw=0.8)
             ax.set_xscale("log")
             ax.set_yscale("log")
-            ax.set_xlabel("iteration + 1" if key == "it" else "wall time [s]")
-            ax.set_ylabel("H(q)")
+            ax.set_xlabel("wall time [s]" if key == "wall" else "iteration + 1")
+            ax.set_ylabel(f"H(q) - {best:.6g}" if key == "gap" else "H(q)")
             ax.set_title(f"{name}, h = {h:g}")
             ax.grid(True, which="both", alpha=0.3)
         axes[0, col].legend(fontsize=8)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
