@@ -604,3 +604,17 @@ def test_mandel_projection_is_exact_on_non_isotropic_frames(frames):
     q = odeco.frames_to_q(lengths[distinct], angles[distinct])
     p = odeco.project(q, method="mandel")
     assert np.all(norms(p - q) <= 1e-12 * norms(q))
+
+
+@pytest.mark.parametrize("max_aspect", [None, 3.0])
+def test_tangent_basis_on_variety_reads_the_same_frames(max_aspect):
+    """The direct read-off (on_variety=True) spans the same tangent spaces as the search."""
+    rng = np.random.default_rng(7)
+    q = odeco.project(rng.normal(size=(3000, 5)), max_aspect=max_aspect)
+    iso = odeco.frames_to_q(np.full((50, 2), 0.7), rng.uniform(-4, 4, 50))
+    q = np.concatenate([q, iso, -iso])  # s < 0 rows too: arg C = 4t + π there
+    gradient = rng.normal(size=q.shape)
+    slow = odeco.tangent_basis(q, max_aspect, gradient)
+    fast = odeco.tangent_basis(q, max_aspect, gradient, on_variety=True)
+    projector = lambda b: np.einsum("nik,njk->nij", b, b)  # noqa: E731
+    assert np.abs(projector(slow) - projector(fast)).max() < 1e-12

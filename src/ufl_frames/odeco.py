@@ -190,7 +190,9 @@ def _tangent_project_rows(q, dq):
     return dq - np.einsum("nik,nk->ni", basis, coeff)
 
 
-def tangent_basis(q, max_aspect: float | None = None, gradient=None) -> np.ndarray:
+def tangent_basis(
+    q, max_aspect: float | None = None, gradient=None, on_variety: bool = False
+) -> np.ndarray:
     """Orthonormal basis (N, 5, 3) of the tangent space of the variety at the frames nearest q.
 
     Columns: e_s (total length), e_d (length difference) and ∂q/∂t (rotation), which
@@ -201,17 +203,34 @@ def tangent_basis(q, max_aspect: float | None = None, gradient=None) -> np.ndarr
     :func:`clamp_aspect`) whose ``gradient`` (N, 5; default: none given) pushes the
     aspect further out lose their e_d column, and e_s becomes the direction along the
     bound (an active set: a gradient pointing inwards releases the frame).
+    ``on_variety`` promises that q lies on the variety: the frame is then read off q
+    directly (about 3x faster) instead of by the closest-point search.
     """
     q = _check_q(q)
     _check_nonzero(q)
     if gradient is None:
         gradient = np.zeros_like(q)
     gradient = _check_q(gradient, "gradient")
-    return _by_chunks(lambda a, g: _tangent_basis_rows(a, max_aspect, g), q, gradient)
+    return _by_chunks(
+        lambda a, g: _tangent_basis_rows(a, max_aspect, g, on_variety), q, gradient
+    )
 
 
-def _tangent_basis_rows(q, max_aspect, gradient):
-    s, d, c4, s4 = _closest_parameters(q, isotropic=False)
+def _parameters_on_variety(q):
+    """(s, d, cos 4t, sin 4t) of a q on the variety: s from q0, 4t from arg C, d from B."""
+    s = q[:, 0] * (8 / (3 * SQRT2))
+    c4, s4 = _unit(q[:, 3], q[:, 4])
+    flip = s < 0  # C = (s/8) e^{4it}: arg C is 4t + π for s < 0
+    c4, s4 = np.where(flip, -c4, c4), np.where(flip, -s4, s4)
+    c2, s2 = _half_angle(c4, s4)
+    return s, 2 * (q[:, 1] * c2 + q[:, 2] * s2), c4, s4
+
+
+def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False):
+    if on_variety:
+        s, d, c4, s4 = _parameters_on_variety(q)
+    else:
+        s, d, c4, s4 = _closest_parameters(q, isotropic=False)
     c2, s2 = _half_angle(c4, s4)
     zero = np.zeros_like(s)
     e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)

@@ -161,13 +161,15 @@ def tangent_basis_rows(
 ) -> np.ndarray:
     """Orthonormal tangent basis (N, 5, 3) of the constraint set at q (zero columns: no dof).
 
+    q must satisfy the constraints (be retracted): the frames are read off it directly.
+
     Interior: 3 dofs (total length e_s, length difference e_d, rotation); isotropic:
     e_s and rotation. Boundary: orientation fixed, so e_s and e_d (isotropic: e_s).
     With an aspect bound, frames at the bound that ``gradient`` pushes outwards lose
     e_d (see :func:`ufl_frames.odeco.tangent_basis`).
     """
     aspect = constraints.max_aspect
-    basis = odeco.tangent_basis(q, max_aspect=aspect, gradient=gradient)
+    basis = odeco.tangent_basis(q, max_aspect=aspect, gradient=gradient, on_variety=True)
     b = constraints.boundary
     if b.size:
         c1, s1 = constraints.normals.T

@@ -376,6 +376,10 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
     problem.write_x(x)
     g = x.duplicate()
 
+    def objective(tao, x):
+        problem.set_from_x(x)
+        return problem.energy()
+
     def objective_gradient(tao, x, g):
         problem.set_from_x(x)
         problem.riemannian_gradient(g)
@@ -400,6 +404,7 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
     tao.setOptionsPrefix(options_prefix)
     tao.setSolution(x)
     tao.setObjectiveGradient(objective_gradient, g)
+    tao.setObjective(objective)  # line-search trials need no gradient
     model = None
     if tao_type in SECOND_ORDER_TYPES:
         opts = PETSc.Options(options_prefix)
