@@ -24,8 +24,9 @@ not seen by the runs. All stop at ``-tao_gttol 1e-6`` (relative Riemannian gradi
 The table (printed, and written to ``<out>/convergence.md``) has per run: iterations (the
 solver's history entries; ``ntr`` also reports its rejected trust-region steps there, each
 of which costs a Newton solve, so it may show more than ``--max-it``), objective/gradient
-evaluations (line-search trials included: ``bncg``'s Armijo search backtracks from a unit
-step, about 13 evaluations per iteration), wall and CPU seconds of the whole ``solve`` call
+evaluations (``f evals``, line-search trials included: ``bncg``'s Armijo search backtracks
+from a unit step, about 13 per iteration) and how many of them computed the gradient too
+(``g evals``), wall and CPU seconds of the whole ``solve`` call
 (CPU: this process, the fairer number on a shared machine; both max over ranks), the final
 H, the final relative Riemannian gradient norm |g|/|g0|, TAO's converged reason, the
 number of singular triangles of the final field, and the first iteration at which H is at
@@ -143,14 +144,20 @@ def run_method(problem, method, max_it):
     def monitor(entry):
         times.append((time.perf_counter() - start, time.process_time() - start_cpu))
 
-    evaluations = [0]
-    gradient = problem.riemannian_gradient
+    # TAO evaluates the objective alone (line-search trials) or with the gradient: both
+    # assemble H once through problem.energy, the latter also problem.riemannian_gradient.
+    counts = {"energy": 0, "gradient": 0}
+    energy, gradient = problem.energy, problem.riemannian_gradient
 
-    def counted(g):  # TAO's objective/gradient callback calls it once per evaluation
-        evaluations[0] += 1
+    def counted_energy():
+        counts["energy"] += 1
+        return energy()
+
+    def counted_gradient(g):
+        counts["gradient"] += 1
         gradient(g)
 
-    problem.riemannian_gradient = counted
+    problem.energy, problem.riemannian_gradient = counted_energy, counted_gradient
     comm.Barrier()
     result = solver.solve(
         problem,
@@ -172,7 +179,8 @@ def run_method(problem, method, max_it):
     return {
         "method": method,
         "iterations": result.iterations,
-        "evaluations": evaluations[0],
+        "evaluations": counts["energy"],
+        "gradients": counts["gradient"],
         "wall": wall,
         "cpu": cpu,
         "H": result.H_final,
@@ -225,7 +233,8 @@ def run_case(comm, name, h, args):
         log(
             comm,
             f"  {name:15s} h={h:<6g} {method:5s} {run['iterations']:5d} its "
-            f"({run['evaluations']:5d} evals) {run['wall']:8.2f} s (cpu {run['cpu']:7.2f}) "
+            f"({run['evaluations']:5d} f, {run['gradients']:5d} g) {run['wall']:8.2f} s "
+            f"(cpu {run['cpu']:7.2f}) "
             f"H={run['H']:.4e} "
             f"|g|/|g0|={run['rel_grad']:.1e} {run['reason']} "
             f"sing={run['singularities']}",
@@ -252,15 +261,15 @@ def fmt(value, spec, missing="-"):
 
 def table(results, sizes):
     header = (
-        "| case | h | triangles | method | its | evals | wall s | cpu s | final H | rel grad "
-        f"| reason | sing. | its to {REFERENCE} H | its ratio | wall ratio | cpu ratio |"
+        "| case | h | triangles | method | its | f evals | g evals | wall s | cpu s | final H "
+        f"| rel grad | reason | sing. | its to {REFERENCE} H | its ratio | wall ratio | cpu ratio |"
     )
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for (name, h), (cells, runs) in results.items():
         for run in runs:
             lines.append(
                 f"| {name} | {h:g} | {cells} | {run['method']} | {run['iterations']} "
-                f"| {run['evaluations']} "
+                f"| {run['evaluations']} | {run['gradients']} "
                 f"| {run['wall']:.1f} | {run['cpu']:.1f} | {run['H']:.4e} "
                 f"| {run['rel_grad']:.1e} | {run['reason']} | {run['singularities']} "
                 f"| {fmt(run['reach'], 'd')} | {fmt(run['its_ratio'], '.1f')} "

@@ -325,6 +325,36 @@ def test_tangent_basis_mixed_rows():
     assert np.array_equal(basis[~outward], odeco.tangent_basis(q[~outward]))
 
 
+@pytest.mark.parametrize("aspect", [1.5, 4.0])
+def test_tangent_basis_active_set_is_first_order_feasibility(aspect):
+    """A frame at the bound is active iff the steepest-descent step −εg leaves the cone.
+
+    Checked geometrically: fit (s', d') of q − εg at the frame's angle (ε small) and test
+    |d'| > κ s', for gradients mixing e_s, e_d and rotation: shrinking s at fixed d leaves
+    the cone just as growing |d| does, so the s-component matters too.
+    """
+    rng = np.random.default_rng(15)
+    n = 400
+    q = frames_on_bound(rng, n, aspect)
+    free = odeco.tangent_basis(q)
+    gradient = np.einsum("nik,nk->ni", free, rng.standard_normal((n, 3)))
+    e_s, e_d = free[:, :, 0] * np.sqrt(ES2), free[:, :, 1] * np.sqrt(ED2)  # unnormalised
+    eps = (
+        1e-7 * np.linalg.norm(q, axis=1, keepdims=True) / np.linalg.norm(gradient, axis=1)[:, None]
+    )
+    step = q - eps * gradient
+    s_new = np.einsum("ni,ni->n", step, e_s) / ES2
+    d_new = np.einsum("ni,ni->n", step, e_d) / ED2
+    leaves = np.abs(d_new) - kappa(aspect) * s_new
+    clear = np.abs(leaves) > 1e-3 * eps[:, 0] * np.linalg.norm(gradient, axis=1)
+    assert clear.mean() > 0.95
+    basis = odeco.tangent_basis(q, max_aspect=aspect, gradient=gradient)
+    active = np.all(basis[:, :, 1] == 0.0, axis=1)
+    assert np.array_equal(active[clear], leaves[clear] > 0)
+    assert 0.2 < active.mean() < 0.8  # both cases are exercised
+    check_orthonormal(basis)
+
+
 def test_tangent_basis_rejects_bad_bounds():
     q = frames_on_bound(np.random.default_rng(14), 4, 2.0)
     for bad in (0.5, np.nan):
