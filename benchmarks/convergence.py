@@ -144,8 +144,8 @@ def run_method(problem, method, max_it):
     def monitor(entry):
         times.append((time.perf_counter() - start, time.process_time() - start_cpu))
 
-    # TAO evaluates the objective alone (line-search trials) or with the gradient: both
-    # assemble H once through problem.energy, the latter also problem.riemannian_gradient.
+    # TAO evaluates the objective alone (line-search trials: problem.energy) or with the
+    # gradient (problem.riemannian_gradient, which returns H as well).
     counts = {"energy": 0, "gradient": 0}
     energy, gradient = problem.energy, problem.riemannian_gradient
 
@@ -155,7 +155,7 @@ def run_method(problem, method, max_it):
 
     def counted_gradient(g):
         counts["gradient"] += 1
-        gradient(g)
+        return gradient(g)
 
     problem.energy, problem.riemannian_gradient = counted_energy, counted_gradient
     comm.Barrier()
