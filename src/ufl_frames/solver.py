@@ -218,9 +218,11 @@ def frame_problem(
 class SolveResult:
     """Outcome of :func:`solve`.
 
-    ``history`` has one entry per TAO monitor call: the initial state, then one per
-    step. ``iterations`` counts those steps; it can exceed TAO's own count by one
-    (``nls`` and ``bncg`` take a first step that TAO numbers 0 again).
+    ``history`` has one entry per TAO monitor call that found a new iterate: the
+    initial state, then one per accepted step (rejected trust-region steps, which
+    ``ntr`` reports too, are left out). ``iterations`` counts those steps; it can
+    exceed TAO's own count by one (``nls`` and ``bncg`` take a first step that TAO
+    numbers 0 again).
     """
 
     history: list[dict]
@@ -398,6 +400,8 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
 
     def record(tao):
         _, f, gnorm, _, step, _ = tao.getSolutionStatus()
+        if history and (f, gnorm) == (history[-1]["H"], history[-1]["gnorm"]):
+            return  # a rejected trust-region step (ntr monitors those too): x did not move
         problem.set_from_x(tao.getSolution())
         entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
                  "gnorm": float(gnorm), "step": float(step)}
