@@ -10,12 +10,11 @@ from ufl_frames.bootstrap import init_petsc
 
 init_petsc([])  # not pytest's command line
 
+import dolfinx  # noqa: E402
+import dolfinx.fem.petsc  # noqa: E402
 import gmsh  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
-
-import dolfinx  # noqa: E402
-import dolfinx.fem.petsc  # noqa: E402
 
 from ufl_frames import geometry  # noqa: E402
 from ufl_frames.geometry import GeometryError  # noqa: E402

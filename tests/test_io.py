@@ -11,10 +11,9 @@ from ufl_frames.bootstrap import init_petsc
 
 init_petsc([])  # not pytest's command line
 
-from mpi4py import MPI  # noqa: E402
-
 import dolfinx  # noqa: E402
 import dolfinx.io  # noqa: E402
+from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import energy, io, odeco  # noqa: E402
 

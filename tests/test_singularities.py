@@ -167,9 +167,8 @@ def _dolfinx():
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc([])  # not pytest's command line
-    from mpi4py import MPI
-
     import dolfinx
+    from mpi4py import MPI
 
     return MPI, dolfinx
 

@@ -13,7 +13,6 @@ with their ``argv``, so that PETSc reads the command line (a library import must
 parse the command line of whatever program imported it, pytest's for instance).
 """
 
-import sys
 from contextlib import contextmanager
 
 _initialised = False
