@@ -47,6 +47,7 @@ import ufl
 from mpi4py import MPI
 
 from ufl_frames import energy, geometry, mbo, odeco, projection, solver
+from ufl_frames.bootstrap import petsc_defaults
 
 COMM = MPI.COMM_WORLD
 
@@ -405,9 +406,15 @@ def test_default_method_converges_superlinearly(annulus_solution):
                 ratio = error[k + 1] / error[k]
                 line += f"  e_k+1/e_k = {ratio:.2e}  p = log e_k+1 / log e_k = {p:.2f}"
             print(line)
-    assert ratios.size >= 2
-    assert np.all(np.diff(ratios) < 0), ratios  # the contraction improves: superlinear
-    assert np.all(ratios[-2:] < 0.1), ratios
+    # The energy error reaches rounding within two steps of Newton (exact Hessian, the
+    # isotropic default), so judge the contraction on the gradient norm as well.
+    grad_ratios = rel_grad[k0 + 1 :] / rel_grad[k0:-1]
+    if COMM.rank == 0:
+        print(f"  |g_k+1|/|g_k| from k = {k0}: {np.array2string(grad_ratios, precision=2)}")
+    assert ratios.size >= 1 and np.all(ratios < 0.1), ratios
+    assert grad_ratios.size >= 2
+    assert np.all(np.diff(grad_ratios) < 0), grad_ratios  # the contraction improves
+    assert np.all(grad_ratios < 0.1), grad_ratios
 
 
 def test_default_method_iteration_count_regression(annulus_solution):
@@ -416,3 +423,35 @@ def test_default_method_iteration_count_regression(annulus_solution):
     assert solver.DEFAULT_OPTIONS["tao_type"] == "nls"
     assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
     assert result.iterations <= 20, result.iterations
+
+
+def test_exact_hessian_is_the_riemannian_hessian_at_a_critical_point():
+    """``-frames_hessian exact``: ∇²H from UFL in the tangent spaces, plus the chart's
+    second-order term g·∂²q (odeco.tangent_curvature) and the sphere's −4H/ρ². At a critical
+    point this is the Riemannian Hessian: d·Bd equals the second difference of H(R(x + εd)).
+
+    The pinned isotropic piano is a large-residual minimum (H ≈ 0.14 at h = 0.2) where the
+    Gauss–Newton part alone is visibly off — checked too."""
+    comm = MPI.COMM_WORLD
+    mesh = geometry.piano(comm, mesh_size=0.2)
+    q = mbo.mbo_frame_field(energy.frame_space(mesh))
+    problem = solver.frame_problem(q, isotropic=True, pin_singularities=True)
+    with petsc_defaults("crit_", {"tao_gttol": 1e-11, "tao_nls_ksp_rtol": 1e-12}):
+        result = solver.solve(problem, max_it=60, options_prefix="crit_")
+    assert result.converged_reason.startswith("CONVERGED")
+    x = scaled_x(problem)
+    gradient_at(problem, x)
+    exact = solver.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0, exact=True)
+    gauss_newton_only = solver.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0)
+    for phase in (0.0, 1.3):
+        d = smooth_tangent(problem, x, phase)
+        fd = second_difference(lambda e: f_along(problem, x, d, e), 1e-3)
+        dbd = d.dot(apply(exact, d))
+        gn = d.dot(apply(gauss_newton_only, d))
+        if comm.rank == 0:
+            print(f"\nphase {phase}: second difference {fd:.6e}, exact model {dbd:.6e}, "
+                  f"Gauss-Newton {gn:.6e}")
+        assert dbd == pytest.approx(fd, rel=1e-4)
+        assert abs(gn - fd) > 100 * abs(dbd - fd)
+    exact.free()
+    gauss_newton_only.free()

@@ -259,6 +259,54 @@ def _descent_leaves_bound(gradient, e_s, e_d, sign, kappa) -> np.ndarray:
     return sign * dd - kappa * ds >= 0
 
 
+def tangent_curvature(
+    q, gradient, max_aspect: float | None = None, isotropic: bool = False, active_gradient=None
+) -> np.ndarray:
+    """Second-order term of the chart: Σ_k g_k ∂²q_k in the basis of :func:`tangent_basis`.
+
+    With q = s e_s(t) + d e_d(t) on the variety (q on it: read off directly) and a
+    gradient g of the energy in q, the Hessian of the energy in the chart (s, d, t) is
+    Jᵀ ∇²E J + W, W_ab = g · ∂²q/∂p_a∂p_b: here W (N, 3, 3), rescaled to the orthonormal
+    columns of ``tangent_basis(q, max_aspect, gradient, on_variety=True)``. Only the
+    rotation couples: ∂²q/∂s∂t = e_s', ∂²q/∂d∂t = e_d', ∂²q/∂t² = s e_s'' + d e_d''.
+    With the normal part of g this is the second fundamental form of the variety. The
+    aspect-bound active set is decided by ``active_gradient`` (default ``gradient``), as
+    in :func:`tangent_basis`.
+    """
+    q = _check_q(q)
+    gradient = _check_q(gradient, "gradient")
+    active_gradient = gradient if active_gradient is None else active_gradient
+    s, d, c4, s4 = _parameters_on_variety(q)
+    c2, s2 = _half_angle(c4, s4)
+    zero = np.zeros_like(s)
+    e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
+    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
+    e_s1 = np.stack([zero, zero, zero, -s4 / 2, c4 / 2], axis=1)
+    e_d1 = np.stack([zero, -s2, c2, zero, zero], axis=1)
+    e_s2 = np.stack([zero, zero, zero, -2 * c4, -2 * s4], axis=1)
+    e_d2 = np.stack([zero, -2 * c2, -2 * s2, zero, zero], axis=1)
+    mixed_s, keep_d = e_s1, ~np.full(s.shape, isotropic)
+    col0 = e_s
+    if max_aspect is not None and not isotropic:
+        kappa = _aspect_kappa(max_aspect)
+        sign = np.where(d < 0, -1.0, 1.0)
+        at_bound = np.abs(d) >= kappa * s * (1 - 1e-9)
+        active = at_bound & _descent_leaves_bound(active_gradient, e_s, e_d, sign, kappa)
+        col0 = np.where(active[:, None], e_s + (sign * kappa)[:, None] * e_d, e_s)
+        mixed_s = np.where(active[:, None], e_s1 + (sign * kappa)[:, None] * e_d1, e_s1)
+        keep_d &= ~active
+    dq_dt = s[:, None] * e_s1 + d[:, None] * e_d1
+    n0, n2 = np.linalg.norm(col0, axis=1), np.linalg.norm(dq_dt, axis=1)
+    n2 = np.where(n2 > 0, n2, 1.0)
+    dot = lambda a, b: np.einsum("ni,ni->n", a, b)  # noqa: E731
+    curvature = np.zeros((q.shape[0], 3, 3))
+    curvature[:, 0, 2] = curvature[:, 2, 0] = dot(gradient, mixed_s) / (n0 * n2)
+    cross = np.where(keep_d, dot(gradient, e_d1) / (0.5 * n2), 0.0)
+    curvature[:, 1, 2] = curvature[:, 2, 1] = cross
+    curvature[:, 2, 2] = dot(gradient, s[:, None] * e_s2 + d[:, None] * e_d2) / n2**2
+    return curvature
+
+
 def _aspect_kappa(max_aspect: float) -> float:
     if not (np.isfinite(max_aspect) and max_aspect >= 1):
         raise ValueError(f"max_aspect must be a finite number >= 1, got {max_aspect}")

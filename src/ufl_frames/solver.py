@@ -49,7 +49,7 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from ufl_frames import energy, projection  # noqa: E402
+from ufl_frames import energy, odeco, projection  # noqa: E402
 
 #: TAO defaults (each overridable from the command line).
 DEFAULT_OPTIONS = {
@@ -127,6 +127,27 @@ class FrameProblem:
         basis = projection.tangent_basis_rows(self.rows, self.constraints, self.last_gradient)
         basis = basis[:n]
         return np.einsum("nik,njk->nij", basis, basis)
+
+    def chart_curvature_blocks(self) -> np.ndarray:
+        """Per owned vertex, B W Bᵀ / m (5×5): the chart's second-order term in x (exact Hessian).
+
+        W from :func:`odeco.tangent_curvature` with the normal part of the Euclidean
+        gradient of H in q (the second fundamental form of the variety); zero where the
+        orientation is fixed (boundary, pinned vertices: the chart is linear).
+        """
+        n, c = self.owned, self.constraints
+        gradient_q = self.last_gradient * self.sqrt_mass[:, None]
+        basis = projection.tangent_basis_rows(self.rows, c, self.last_gradient)
+        # Only the normal part of the gradient pairs with the second fundamental form; the
+        # tangent part is the sphere's (radial) at a critical point, counted separately.
+        normal = gradient_q - np.einsum("nia,na->ni", basis, np.einsum("nia,ni->na", basis,
+                                                                       gradient_q))
+        curvature = odeco.tangent_curvature(
+            self.rows, normal, c.max_aspect, c.isotropic, active_gradient=self.last_gradient
+        )
+        curvature[c.boundary] = 0.0
+        blocks = np.einsum("nia,nab,njb->nij", basis, curvature, basis)[:n]
+        return blocks / self.constraints.weights[:n, None, None]
 
     def energy(self) -> float:
         return self.q.function_space.mesh.comm.allreduce(
@@ -270,15 +291,35 @@ class GaussNewtonModel:
       become singular and the Krylov iterations explode (measured: 85 Newton steps and
       ~70 s against 35 steps and ~3 s with r = 1e-3 on the annulus at h = 0.05).
 
+    With ``exact`` (``-frames_hessian exact``, the default for isotropic frames) JᵀJ is
+    replaced by the full Hessian ∇²H (UFL, second derivative of H), and the curvature of
+    the constraint set is added: per vertex the second fundamental form of the variety
+    paired with the normal part of the gradient (:func:`odeco.tangent_curvature`, zero
+    where the orientation is fixed), and −4H/ρ² on the sphere's tangent space (x·∇H = 4H).
+    At a critical point this is the Riemannian Hessian (tested against second
+    differences of H∘R to 1e-7): Newton then converges quadratically even where the
+    residual is large — the pinned isotropic piano (H ≈ 0.18) takes 10 iterations at
+    h = 0.05 against 58 with Gauss–Newton. For non-isotropic frames Gauss–Newton stays
+    the default: ∇²H is indefinite along their many free directions, and it was no
+    faster there (annulus 14/21 iterations at h = 0.1/0.05 against 17/29).
+
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix, so ``-tao_nls_pc_type`` / ``-tao_ntr_pc_type``
     (gamg, hypre, lu, ...) act on it.
     """
 
     def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0,
-                 damping_min: float = 1e-3):
+                 damping_min: float = 1e-3, exact: bool = False):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
-        self.form = fem.form(energy.gauss_newton_form(problem.q))
+        self.exact, self.sphere = exact, 0.0
+        if exact:
+            H = energy.integrability_energy_form(problem.q)
+            V = problem.q.function_space
+            hessian = ufl.derivative(energy.gradient_form(H, problem.q), problem.q,
+                                     ufl.TrialFunction(V))
+            self.form = fem.form(hessian)
+        else:
+            self.form = fem.form(energy.gauss_newton_form(problem.q))
         self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
         self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], 5)
@@ -323,9 +364,17 @@ class GaussNewtonModel:
         diagonal, dofs = result.getDiagonal(), self.tangent.getDiagonal()
         self.mu = diagonal.sum() / max(dofs.sum(), 1.0)
         result.axpy(self.mu, self.normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        if self.exact and problem.last_gradient is not None:
+            self.curvature = _block_diagonal(problem.chart_curvature_blocks(), index_map, comm,
+                                             getattr(self, "curvature", None))
+            result.axpy(1.0, self.curvature,
+                        structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         diagonal.destroy()
         dofs.destroy()
         problem.write_x(self.xhat)
+        if self.exact:
+            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
+            self.sphere = 4 * problem.energy() / self.xhat.dot(self.xhat)
         self.xhat.normalize()
         self.shift_value = 0.0
         return result
@@ -335,11 +384,14 @@ class GaussNewtonModel:
         self.problem.set_from_x(x)
         self._assemble(self.assembled, gnorm=tao.getGradient()[0].norm())
 
+
     # MatShell interface
     def mult(self, mat, v, y):
         along = self.xhat.dot(v)
         self.work.waxpy(-along, self.xhat, v)
         self.assembled.mult(self.work, y)
+        if self.sphere:
+            y.axpy(-self.sphere, self.work)
         y.axpy(self.mu * along - self.xhat.dot(y), self.xhat)
         if self.shift_value:
             y.axpy(self.shift_value, v)
@@ -417,8 +469,13 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
     model = None
     if tao_type in SECOND_ORDER_TYPES:
         opts = PETSc.Options(options_prefix)
+        default = "exact" if problem.constraints.isotropic else "gauss_newton"
+        hessian = opts.getString("frames_hessian", default)
+        if hessian not in ("exact", "gauss_newton"):
+            raise ValueError(f"-frames_hessian must be 'exact' or 'gauss_newton', got {hessian!r}")
         model = GaussNewtonModel(problem, x, damping=opts.getReal("frames_gn_damping", 1.0),
-                                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3))
+                                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
+                                 exact=hessian == "exact")
         tao.setHessian(model.update, model.shell, model.assembled)
     tao.setUpdate(update)
     tao.setMonitor(record)
