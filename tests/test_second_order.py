@@ -445,7 +445,7 @@ def test_exact_hessian_is_the_riemannian_hessian_at_a_critical_point():
     gauss_newton_only = solver.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0)
     for phase in (0.0, 1.3):
         d = smooth_tangent(problem, x, phase)
-        fd = second_difference(lambda e: f_along(problem, x, d, e), 1e-3)
+        fd = second_difference(lambda e, d=d: f_along(problem, x, d, e), 1e-3)
         dbd = d.dot(apply(exact, d))
         gn = d.dot(apply(gauss_newton_only, d))
         if comm.rank == 0:
