@@ -119,7 +119,12 @@
 # $$
 #
 # where $R$ is steps (4)–(5), $\alpha$ comes from a line search, and the $H^1$ damping
-# $\lambda$ shrinks with the gradient (`ufl_frames.solver.GaussNewtonModel`).
+# $\lambda$ shrinks with the gradient (`ufl_frames.solver.GaussNewtonModel`). For
+# isotropic frames the default replaces $J^\top J$ by the exact Riemannian Hessian:
+# $\nabla^2 H$ (a second `ufl.derivative`) plus the curvature of the constraints — the
+# second fundamental form of the Odeco variety paired with the normal part of
+# $\nabla H$, and $-4H/\rho^2$ from the fixed norm $\rho$ — which makes it Newton's
+# method on $\mathcal M_h$ (`-frames_hessian exact|gauss_newton` to choose).
 #
 # ## The annulus and its integrable fields
 #
