@@ -618,3 +618,14 @@ def test_tangent_basis_on_variety_reads_the_same_frames(max_aspect):
     fast = odeco.tangent_basis(q, max_aspect, gradient, on_variety=True)
     projector = lambda b: np.einsum("nik,njk->nij", b, b)  # noqa: E731
     assert np.abs(projector(slow) - projector(fast)).max() < 1e-12
+
+
+def test_tangent_project_is_idempotent_for_badly_conditioned_normals():
+    """Found by hypothesis under MPI: at q = (0, 0, 43, 0, 0.5) the normals' Gram matrix
+    lost 1e-12 of idempotence (condition number squared); the SVD keeps rounding level."""
+    q = np.array([[0.0, 0.0, 43.0, 0.0, 0.5]])
+    for seed in range(200):
+        dq = np.random.default_rng(seed).standard_normal(q.shape)
+        for point in (q, odeco.project(q)):
+            t = odeco.tangent_project(point, dq)
+            np.testing.assert_allclose(odeco.tangent_project(point, t), t, atol=1e-14)

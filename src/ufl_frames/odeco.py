@@ -166,8 +166,8 @@ def tangent_project(q, dq) -> np.ndarray:
 
     The normal space at q is spanned by the gradients A_m q of the three equations,
     which have rank 2 only (the variety is 3-dimensional in R⁵, NOTES §1), so the
-    normals are orthonormalised through the pseudo-inverse of their Gram matrix
-    (eigenvalues below a relative 1e-10 are discarded) before they are removed.
+    normals are orthonormalised by a singular value decomposition (singular values
+    below a relative 1e-5 are discarded) before they are removed.
     """
     q = _check_q(q)
     dq = _check_q(dq, "dq")
@@ -181,13 +181,12 @@ def _tangent_project_rows(q, dq):
     scale = np.max(np.abs(q), axis=1, keepdims=True)
     q = q / np.where(scale > 0, scale, 1.0)
     normals = np.einsum("mij,nj->nim", VARIETY_MATRICES, q)  # (N, 5, 3)
-    gram = np.einsum("nim,nik->nmk", normals, normals)
-    w, v = np.linalg.eigh(gram)  # ascending
-    keep = w > 1e-10 * w[:, -1:]
-    inv_w = np.where(keep, 1.0 / np.where(keep, w, 1.0), 0.0)
-    basis = np.einsum("nim,nmk->nik", normals, v)  # orthogonal columns, norms √w
-    coeff = np.einsum("nik,ni->nk", basis, dq) * inv_w
-    return dq - np.einsum("nik,nk->ni", basis, coeff)
+    # Orthonormalise by SVD of the normals themselves (error ~ ε κ, where the Gram
+    # matrix would square the condition number κ); rank is 2 on the variety.
+    u, sigma, _ = np.linalg.svd(normals, full_matrices=False)
+    keep = sigma > 1e-5 * sigma[:, :1]
+    basis = u * keep[:, None, :]
+    return dq - np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
 
 
 def tangent_basis(

@@ -25,7 +25,8 @@ and the stopping tests (``-tao_gttol``: relative gradient norm, default 1e-6;
 ``-tao_gatol``, ``-tao_max_it``):
 
 * ``nls`` (default), ``ntr``, ``bnls``, ``bntr``: Newton line search / trust region on
-  the Riemannian Gauss–Newton model of :class:`GaussNewtonModel`; the Newton systems
+  the model of :class:`GaussNewtonModel` — the exact Riemannian Hessian for isotropic
+  frames, Gauss–Newton for non-isotropic ones (``-frames_hessian``); the Newton systems
   are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``, default GAMG);
 * ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
 * ``bncg`` with ``-tao_bncg_type gd`` (set by default for ``bncg``) and an Armijo line
@@ -269,7 +270,7 @@ SECOND_ORDER_TYPES = {"nls", "ntr", "ntl", "bnls", "bntr", "bntl", "tron"}
 
 
 class GaussNewtonModel:
-    r"""Riemannian Gauss–Newton Hessian of H on 𝓜, with Sobolev (H¹) damping.
+    r"""Riemannian (Gauss–)Newton Hessian of H on 𝓜, with Sobolev (H¹) damping.
 
     In the scaled unknowns x = W q (W = diag √m) at the current iterate:
 
