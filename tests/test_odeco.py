@@ -20,6 +20,8 @@ pairs, relative to the longer branch) and |Δq|/|q|:
     l1 ≈ l2, so the lengths are not recovered at all; NOTES §2.)
 """
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -27,7 +29,13 @@ from hypothesis import strategies as st
 
 from ufl_frames import odeco
 
-SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# Random exploration on developer runs (it found real bugs); a fixed sequence in CI.
+SETTINGS = settings(
+    max_examples=40,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+    derandomize=bool(os.environ.get("CI")),
+)
 SQRT2 = np.sqrt(2.0)
 
 
