@@ -168,32 +168,10 @@ def tangent_basis_rows(
     With an aspect bound, frames at the bound that ``gradient`` pushes outwards lose
     e_d (see :func:`ufl_frames.odeco.tangent_basis`).
     """
-    aspect = constraints.max_aspect
-    basis = odeco.tangent_basis(q, max_aspect=aspect, gradient=gradient, on_variety=True)
-    b = constraints.boundary
-    if b.size:
-        c1, s1 = constraints.normals.T
-        c2, s2 = c1 * c1 - s1 * s1, 2 * s1 * c1
-        c4, s4 = c2 * c2 - s2 * s2, 2 * s2 * c2
-        e_s = np.zeros((b.size, 5))
-        e_s[:, 0], e_s[:, 3], e_s[:, 4] = 3 * odeco.SQRT2 / 8, c4 / 8, s4 / 8
-        e_d = np.zeros((b.size, 5))
-        e_d[:, 1], e_d[:, 2] = c2 / 2, s2 / 2
-        if aspect is not None:
-            kappa = (aspect - 1) / (aspect + 1)
-            s_len = np.einsum("ni,ni->n", q[b], e_s) / (19 / 64)
-            d_len = 4 * np.einsum("ni,ni->n", q[b], e_d)
-            sign = np.where(d_len < 0, -1.0, 1.0)
-            g = np.zeros((b.size, 5)) if gradient is None else gradient[b]
-            active = (np.abs(d_len) >= kappa * s_len * (1 - 1e-9)) & (
-                odeco._descent_leaves_bound(g, e_s, e_d, sign, kappa)
-            )
-            e_s = np.where(active[:, None], e_s + (sign * kappa)[:, None] * e_d, e_s)
-            e_d = np.where(active[:, None], 0.0, e_d)
-        basis[b] = 0.0
-        basis[b, :, 0] = e_s / np.linalg.norm(e_s, axis=1, keepdims=True)
-        norm_d = np.linalg.norm(e_d, axis=1, keepdims=True)
-        basis[b, :, 1] = e_d / np.where(norm_d > 0, norm_d, 1.0)
+    basis = odeco.tangent_basis(
+        q, max_aspect=constraints.max_aspect, gradient=gradient, on_variety=True
+    )
+    basis[constraints.boundary, :, 2] = 0.0  # orientation held: no rotation
     if constraints.isotropic:
         basis[:, :, 1] = 0.0
     return basis
