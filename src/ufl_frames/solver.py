@@ -73,7 +73,7 @@ TYPE_OPTIONS = {
 _REASONS = {
     getattr(PETSc.TAO.ConvergedReason, name): name
     for name in dir(PETSc.TAO.ConvergedReason)
-    if name.isupper() or name.startswith(("CONVERGED", "DIVERGED", "CONTINUE"))
+    if not name.startswith("_")
 }
 
 
@@ -95,6 +95,8 @@ class FrameProblem:
     sqrt_mass: np.ndarray = field(repr=False)
     #: The last assembled dH/dq, scaled (local rows): decides the active aspect bounds.
     last_gradient: np.ndarray | None = field(default=None, repr=False)
+    #: H at the point of ``last_gradient``.
+    last_energy: float | None = None
 
     @property
     def rows(self) -> np.ndarray:
@@ -122,15 +124,14 @@ class FrameProblem:
         n = self.owned
         x.getArray()[:] = (self.rows[:n] * self.sqrt_mass[:n, None]).ravel()
 
-    def tangent_blocks(self) -> np.ndarray:
-        """Per owned vertex, the 5×5 tangent projector of the constraints (sphere excepted)."""
-        n = self.owned
-        basis = projection.tangent_basis_rows(self.rows, self.constraints, self.last_gradient)
-        basis = basis[:n]
-        return np.einsum("nik,njk->nij", basis, basis)
+    def tangent_basis(self) -> np.ndarray:
+        """Tangent basis of the constraints at q (local rows), active set from the last gradient."""
+        return projection.tangent_basis_rows(self.rows, self.constraints, self.last_gradient)
 
-    def chart_curvature_blocks(self) -> np.ndarray:
+    def chart_curvature_blocks(self, basis: np.ndarray) -> np.ndarray:
         """Per owned vertex, B W Bᵀ / m (5×5): the chart's second-order term in x (exact Hessian).
+
+        ``basis``: :meth:`tangent_basis` at the same q.
 
         W from :func:`odeco.tangent_curvature` with the normal part of the Euclidean
         gradient of H in q (the second fundamental form of the variety); zero where the
@@ -138,7 +139,6 @@ class FrameProblem:
         """
         n, c = self.owned, self.constraints
         gradient_q = self.last_gradient * self.sqrt_mass[:, None]
-        basis = projection.tangent_basis_rows(self.rows, c, self.last_gradient)
         # Only the normal part of the gradient pairs with the second fundamental form; the
         # tangent part is the sphere's (radial) at a critical point, counted separately.
         normal = gradient_q - np.einsum("nia,na->ni", basis, np.einsum("nia,ni->na", basis,
@@ -173,7 +173,7 @@ class FrameProblem:
         H = comm.allreduce(float(np.dot(b.array[: 5 * n], self.q.x.array[: 5 * n])), op=MPI.SUM)
         # Ghost rows of b are partial sums: projected along (pointwise), then dropped.
         dh = b.array.reshape(-1, 5) / self.sqrt_mass[:, None]
-        self.last_gradient = dh
+        self.last_gradient, self.last_energy = dh, H / 4
         dh = projection.tangent_project_rows(self.rows, dh, self.constraints)[:n]
         x = self.rows[:n] * self.sqrt_mass[:n, None]
         along = comm.allreduce(float(np.vdot(dh, x)), op=MPI.SUM) / comm.allreduce(
@@ -332,6 +332,7 @@ class GaussNewtonModel:
         self.sobolev.diagonalScale(self.unscale, self.unscale)
         self.xhat, self.work = template.duplicate(), template.duplicate()
         self.mu, self.shift_value, self.lam, self.gnorm0 = 1.0, 0.0, 0.0, None
+        self.tangent = self.normal = self.curvature = None  # block-diagonal, reused
         self.assembled = self._assemble(None, gnorm=None)  # pattern only: TAO calls update
         self.shell = PETSc.Mat().createPython(self.assembled.getSizes(), comm=template.comm)
         self.shell.setPythonContext(self)
@@ -352,12 +353,11 @@ class GaussNewtonModel:
         ratio = 1.0 if gnorm is None else min(1.0, gnorm / self.gnorm0)
         self.lam = self.damping * max(self.damping_min, ratio) * scale
         G.axpy(self.lam, self.sobolev, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        blocks = problem.tangent_blocks()
+        basis = problem.tangent_basis()
+        blocks = np.einsum("nik,njk->nij", basis[:n], basis[:n])
         index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
-        self.tangent = _block_diagonal(blocks, index_map, comm, getattr(self, "tangent", None))
-        self.normal = _block_diagonal(
-            np.eye(5) - blocks, index_map, comm, getattr(self, "normal", None)
-        )
+        self.tangent = _block_diagonal(blocks, index_map, comm, self.tangent)
+        self.normal = _block_diagonal(np.eye(5) - blocks, index_map, comm, self.normal)
         if result is None:
             result = G.PtAP(self.tangent)
         else:
@@ -366,8 +366,9 @@ class GaussNewtonModel:
         self.mu = diagonal.sum() / max(dofs.sum(), 1.0)
         result.axpy(self.mu, self.normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if self.exact and problem.last_gradient is not None:
-            self.curvature = _block_diagonal(problem.chart_curvature_blocks(), index_map, comm,
-                                             getattr(self, "curvature", None))
+            self.curvature = _block_diagonal(
+                problem.chart_curvature_blocks(basis), index_map, comm, self.curvature
+            )
             result.axpy(1.0, self.curvature,
                         structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         diagonal.destroy()
@@ -375,7 +376,8 @@ class GaussNewtonModel:
         problem.write_x(self.xhat)
         if self.exact:
             # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
-            self.sphere = 4 * problem.energy() / self.xhat.dot(self.xhat)
+            H = problem.energy() if problem.last_energy is None else problem.last_energy
+            self.sphere = 4 * H / self.xhat.dot(self.xhat)
         self.xhat.normalize()
         self.shift_value = 0.0
         return result
@@ -384,7 +386,6 @@ class GaussNewtonModel:
         """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
         self.problem.set_from_x(x)
         self._assemble(self.assembled, gnorm=tao.getGradient()[0].norm())
-
 
     # MatShell interface
     def mult(self, mat, v, y):
@@ -403,8 +404,9 @@ class GaussNewtonModel:
     def free(self):
         """Destroy the PETSc objects (not named ``destroy``: MatPython calls that one)."""
         for obj in (self.shell, self.assembled, self.gauss_newton, self.sobolev, self.unscale,
-                    self.xhat, self.work, self.tangent, self.normal):
-            obj.destroy()
+                    self.xhat, self.work, self.tangent, self.normal, self.curvature):
+            if obj is not None:
+                obj.destroy()
 
 
 def solve(
