@@ -3,18 +3,23 @@ r"""Results on disk: the run summary, the field for ParaView and the two figures
 * :func:`write_summary` — a JSON file (rank 0 writes it).
 * :func:`write_field` — the final frame field, for ParaView, in one ADIOS2 ``.bp``
   folder (:class:`dolfinx.io.VTXWriter`), or an XDMF file where DOLFINx was built
-  without ADIOS2.
+  without ADIOS2, and always also as ASCII VTK (``.pvd`` + ``.pvtu`` + one ``.vtu``
+  per rank), which :func:`read_vtk` reads back with the standard library alone.
 * :func:`plot_frames` — crosses coloured by frame length, with the singularities
-  (note Fig. 1).
+  (note Fig. 1), sized for the domain's aspect ratio (:func:`frame_layout`).
 * :func:`plot_convergence` — H(q) and E(q) against the iteration (note Fig. 2).
+* :func:`describe_singularities` — a one-line console summary.
 
-Every function is collective over the mesh communicator (call it on all ranks):
-data are gathered to rank 0, which alone writes.
+Every function that takes a DOLFINx object is collective over the mesh communicator
+(call it on all ranks): data are gathered to rank 0, which alone writes.
 """
 
 import json
 import math
+import textwrap
+import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import NamedTuple
 
 from ufl_frames.bootstrap import init_petsc
 
@@ -30,12 +35,44 @@ from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import energy, odeco  # noqa: E402
 
-__all__ = ["plot_convergence", "plot_frames", "write_field", "write_summary"]
+__all__ = [
+    "describe_singularities",
+    "frame_layout",
+    "plot_convergence",
+    "plot_frames",
+    "read_vtk",
+    "write_field",
+    "write_summary",
+]
 
-#: Sampled crosses across the longer side of the bounding box in :func:`plot_frames`.
+#: Crosses aimed at over the domain (its area, not its bounding box) in :func:`plot_frames`.
+GLYPHS = 1500
+#: The older density rule, crosses across the longer side of the bounding box; used only
+#: where ``glyphs_across`` is passed explicitly.
 GLYPHS_ACROSS = 36
 #: Half-length of the longer arm of a cross, as a fraction of the glyph spacing.
-GLYPH_ARM = 0.42
+GLYPH_ARM = 0.36
+#: Smallest distance between crosses on the figure (inches; 14 px at :data:`DPI`): on
+#: very elongated domains the target count would give crosses too small to read.
+GLYPH_MIN_SPACING_IN = 0.07
+#: Near the boundary a cross shrinks to its distance from it, but not below this fraction
+#: of the full arm (so that crosses on the boundary itself stay visible).
+GLYPH_MIN_ARM = 0.35
+#: Resolution of the PNG figures.
+DPI = 200
+#: Area (square inches) of the data area of :func:`plot_frames` for a compact domain.
+AXES_AREA_IN2 = 40.0
+#: Longest side (inches) of the data area when the domain is wide / tall (screens are
+#: wider than tall).
+AXES_LONG_MAX_IN = (15.0, 11.0)
+#: Smallest figure (inches): room for a wrapped title, the axis labels and the colour bar.
+FIGURE_MIN_IN = (3.0, 2.5)
+#: Font size of the title of :func:`plot_frames` (points).
+TITLE_FONTSIZE = 11.0
+#: :func:`describe_singularities` lists up to this many; more are counted per index.
+DESCRIBE_LIMIT = 6
+#: Beyond this many singularities the markers are small dots without an outline.
+MANY_SINGULARITIES = 200
 
 
 # --- summary --------------------------------------------------------------------
@@ -132,29 +169,121 @@ def field_functions(q: fem.Function) -> list[fem.Function]:
     return [q_out, *out, bracket_rms(q)]
 
 
-def write_field(directory, q: fem.Function, stem: str = "frames") -> Path:
-    """Write the frame field for ParaView into ``directory``; return the path written.
+def write_field(directory, q: fem.Function, stem: str = "frames") -> list[Path]:
+    """Write the frame field into ``directory``; return the paths written (same on all ranks).
 
-    ``<stem>.bp`` (ADIOS2, :class:`dolfinx.io.VTXWriter`: the P1 functions as point
-    data and ``bracket_rms`` as cell data, in one file) when DOLFINx has ADIOS2,
-    otherwise ``<stem>.xdmf`` (+ ``.h5``). The functions are listed in
-    :func:`field_functions`. Collective.
+    The functions of :func:`field_functions`, twice:
+
+    * ``<stem>.bp`` (ADIOS2, :class:`dolfinx.io.VTXWriter`: the P1 functions as point
+      data and ``bracket_rms`` as cell data, in one folder) when DOLFINx has ADIOS2,
+      otherwise ``<stem>.xdmf`` + ``<stem>.h5``;
+    * ``<stem>.pvd`` + ``<stem>000000.pvtu`` + one ``<stem>_p<rank>_000000.vtu`` per
+      rank (:class:`dolfinx.io.VTKFile`, ASCII XML): ParaView opens it too, and unlike
+      the others it can be read back here without ADIOS2 or HDF5 (:func:`read_vtk`).
+
+    The list is in that order (the ``.bp`` folder is one entry). Collective.
     """
     directory = Path(directory)
     comm = q.function_space.mesh.comm
     functions = field_functions(q)
     if dolfinx.io.has_adios2:
-        path = directory / f"{stem}.bp"
-        with dolfinx.io.VTXWriter(comm, path, functions, engine="BP4") as writer:
+        paths = [directory / f"{stem}.bp"]
+        with dolfinx.io.VTXWriter(comm, paths[0], functions, engine="BP4") as writer:
             writer.write(0.0)
     else:
-        path = directory / f"{stem}.xdmf"
-        with dolfinx.io.XDMFFile(comm, path, "w") as xdmf:
+        paths = [directory / f"{stem}.xdmf", directory / f"{stem}.h5"]
+        with dolfinx.io.XDMFFile(comm, paths[0], "w") as xdmf:
             xdmf.write_mesh(q.function_space.mesh)
             for f in functions:
                 xdmf.write_function(f, 0.0)
+    pvd = directory / f"{stem}.pvd"
+    with dolfinx.io.VTKFile(comm, pvd, "w") as vtk:
+        vtk.write_function(functions, 0.0)
     comm.Barrier()
-    return path
+    # The piece names are DOLFINx's: read them from the files rather than guess them.
+    written = [pvd, *_vtk_references(pvd)] if comm.rank == 0 else None
+    return paths + comm.bcast(written, root=0)
+
+
+# --- reading VTK back -------------------------------------------------------------------
+
+_VTK_DTYPES = {
+    "Float32": np.float32, "Float64": np.float64, "Int8": np.int8, "UInt8": np.uint8,
+    "Int16": np.int16, "UInt16": np.uint16, "Int32": np.int32, "UInt32": np.uint32,
+    "Int64": np.int64, "UInt64": np.uint64,
+}
+
+
+def _vtk_references(path: Path) -> list[Path]:
+    """Files a ``.pvd`` (its data sets) or ``.pvtu`` (its pieces) names, recursively."""
+    root = ET.parse(path).getroot()
+    if path.suffix == ".pvd":
+        names = [d.get("file") for d in root.iter("DataSet")]
+    elif path.suffix == ".pvtu":
+        names = [piece.get("Source") for piece in root.iter("Piece")]
+    else:
+        return []
+    out = []
+    for name in names:
+        child = path.parent / name
+        out += [child, *_vtk_references(child)]
+    return out
+
+
+def _vtk_array(element) -> tuple[str, np.ndarray]:
+    """(Name, values) of an ASCII ``DataArray``: shape (n,) or (n, NumberOfComponents)."""
+    if element.get("format") != "ascii":
+        raise ValueError(f"only ASCII VTK data arrays can be read, got {element.get('format')!r}")
+    values = np.array((element.text or "").split(), dtype=_VTK_DTYPES[element.get("type")])
+    components = int(element.get("NumberOfComponents", "1"))
+    return element.get("Name"), values.reshape(-1, components) if components > 1 else values
+
+
+def _read_vtu(path: Path) -> dict:
+    piece = ET.parse(path).getroot().find("UnstructuredGrid/Piece")
+    points = _vtk_array(piece.find("Points/DataArray"))[1]
+    cells = dict(_vtk_array(e) for e in piece.findall("Cells/DataArray"))
+    point_data = dict(_vtk_array(e) for e in piece.findall("PointData/DataArray"))
+    cell_data = dict(_vtk_array(e) for e in piece.findall("CellData/DataArray"))
+    sizes = np.diff(cells["offsets"], prepend=0)
+    if sizes.size and np.any(sizes != sizes[0]):
+        raise ValueError(f"{path}: cells of mixed sizes are not supported")
+    connectivity = cells["connectivity"].reshape(sizes.size, -1).astype(np.int64)
+    # Cells owned by another rank are repeated in this piece, flagged in vtkGhostType.
+    keep = cell_data.get("vtkGhostType", np.zeros(sizes.size, dtype=np.uint8)) == 0
+    return {
+        "points": points,
+        "cells": connectivity[keep],
+        "point_data": {k: v for k, v in point_data.items() if not k.startswith("vtk")},
+        "cell_data": {k: v[keep] for k, v in cell_data.items() if not k.startswith("vtk")},
+    }
+
+
+def read_vtk(path) -> dict:
+    """The mesh and data of an ASCII VTK file (``.pvd``, ``.pvtu`` or ``.vtu``).
+
+    Returns ``{"points": (N, 3), "cells": (M, k) indices into points, "point_data":
+    {name: (N,) or (N, c)}, "cell_data": {name: (M,) or (M, c)}}``. The pieces of a
+    parallel file are concatenated: ghost cells are dropped, so every cell appears
+    once, but a point shared by pieces appears once per piece. VTK's bookkeeping
+    arrays (``vtk*``) are left out; 2-vectors come back with 3 components (z = 0). A
+    ``.pvd`` gives its first data set. The standard library's XML parser is enough:
+    this is how results are read back without ParaView, ADIOS2 or HDF5.
+    """
+    path = Path(path)
+    if path.suffix == ".pvd":
+        path = _vtk_references(path)[0]
+    pieces = [p for p in _vtk_references(path) if p.suffix == ".vtu"] or [path]
+    parts = [_read_vtu(p) for p in pieces]
+    first = np.cumsum([0] + [len(part["points"]) for part in parts[:-1]])
+    return {
+        "points": np.concatenate([part["points"] for part in parts]),
+        "cells": np.concatenate([part["cells"] + k for part, k in zip(parts, first, strict=True)]),
+        "point_data": {name: np.concatenate([part["point_data"][name] for part in parts])
+                       for name in parts[0]["point_data"]},
+        "cell_data": {name: np.concatenate([part["cell_data"][name] for part in parts])
+                      for name in parts[0]["cell_data"]},
+    }
 
 
 # --- gathering to rank 0 -------------------------------------------------------------
@@ -175,12 +304,25 @@ def _boundary_segments(mesh) -> np.ndarray:
     return mesh.geometry.x[nodes][:, :, :2].reshape(-1, 2, 2)
 
 
+def _domain_area(mesh) -> float:
+    """Area of the mesh (collective)."""
+    local = fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh)))
+    return mesh.comm.allreduce(local, op=MPI.SUM)
+
+
+def _bounding_box(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of the mesh's vertices over all ranks (collective)."""
+    x = mesh.geometry.x[:, :2]
+    lo, hi = np.empty(2), np.empty(2)
+    mesh.comm.Allreduce(x.min(axis=0, initial=np.inf), lo, op=MPI.MIN)
+    mesh.comm.Allreduce(x.max(axis=0, initial=-np.inf), hi, op=MPI.MAX)
+    return lo, hi
+
+
 def _mean_edge_length(mesh) -> float:
     """h of equilateral triangles with the mesh's area and cell count (collective)."""
-    comm = mesh.comm
-    area = comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh))), op=MPI.SUM)
     cells = mesh.topology.index_map(mesh.topology.dim).size_global
-    return math.sqrt(4 * area / (math.sqrt(3) * cells))
+    return math.sqrt(4 * _domain_area(mesh) / (math.sqrt(3) * cells))
 
 
 def grid_points(lo, hi, spacing: float) -> np.ndarray:
@@ -213,22 +355,33 @@ def _evaluate_owned(q: fem.Function, points: np.ndarray):
     return found, np.asarray(values).reshape(-1, 5)
 
 
-def glyph_samples(q: fem.Function, glyphs_across: int = GLYPHS_ACROSS):
+def glyph_samples(
+    q: fem.Function,
+    glyphs_across: int | None = None,
+    *,
+    glyphs: int = GLYPHS,
+    spacing: float | None = None,
+):
     """Where to draw crosses: (points (M, 2), q there (M, 5), spacing) on rank 0. Collective.
 
-    On a mesh finer than the spacing (longer side / ``glyphs_across``), q is evaluated
-    (P1 interpolation, exact for the discrete field) at the points of a regular grid
-    that lie in the domain: a regular lattice of crosses. On coarser meshes every
-    vertex gets a cross and the spacing is the mean edge length. Other ranks get Nones.
+    The spacing is ``spacing`` if given, else the longer side of the bounding box /
+    ``glyphs_across`` if given, else √(area / ``glyphs``): about ``glyphs`` crosses in
+    the domain whatever its shape (holes and concave parts do not count). On a mesh
+    finer than the spacing, q is evaluated (P1 interpolation, exact for the discrete
+    field) at the points of a regular grid that lie in the domain: a regular lattice
+    of crosses. On coarser meshes every vertex gets a cross and the spacing is the
+    mean edge length. Other ranks get Nones.
     """
     V = q.function_space
     mesh = V.mesh
     comm = mesh.comm
-    x = mesh.geometry.x[:, :2]
-    lo, hi = np.empty(2), np.empty(2)
-    comm.Allreduce(x.min(axis=0, initial=np.inf), lo, op=MPI.MIN)
-    comm.Allreduce(x.max(axis=0, initial=-np.inf), hi, op=MPI.MAX)
-    spacing = float((hi - lo).max()) / glyphs_across
+    lo, hi = _bounding_box(mesh)
+    if spacing is None:
+        if glyphs_across is not None:
+            spacing = float((hi - lo).max()) / glyphs_across
+        else:
+            spacing = math.sqrt(_domain_area(mesh) / glyphs)
+    spacing = float(spacing)
     h = _mean_edge_length(mesh)
     if h >= 0.8 * spacing:
         owned = V.dofmap.index_map.size_local
@@ -270,10 +423,32 @@ def _pyplot():
     return plt
 
 
+def _distance_to_segments(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Distance (M,) of each point (M, 2) to the nearest of the segments (nf, 2, 2)."""
+    out = np.full(points.shape[0], np.inf)
+    if segments.shape[0] == 0:
+        return out
+    a = segments[:, 0]
+    d = segments[:, 1] - a
+    dd = np.einsum("ij,ij->i", d, d)
+    dd[dd == 0] = 1.0  # a degenerate facet: its distance is to its first point
+    # Chunks of points keep the (points x segments) arrays near 8 MB each.
+    step = max(1, 2**20 // segments.shape[0])
+    for i in range(0, points.shape[0], step):
+        rel = points[i : i + step, None, :] - a[None]
+        t = np.clip(np.einsum("pij,ij->pi", rel, d) / dd, 0.0, 1.0)
+        r = rel - t[..., None] * d
+        out[i : i + step] = np.sqrt(np.einsum("pij,pij->pi", r, r).min(axis=1))
+    return out
+
+
 def _glyph_segments(points, u, v, lengths, arm):
-    """Two segments per point, ±u and ±v, the longer arm ``arm`` long; colours = lengths."""
+    """Two segments per point, ±u and ±v, the longer arm ``arm`` long; colours = lengths.
+
+    ``arm`` is a number or one per point (M,).
+    """
     longest = lengths.max(axis=1, keepdims=True)
-    scale = arm / np.where(longest > 0, longest, 1.0)
+    scale = np.reshape(arm, (-1, 1)) / np.where(longest > 0, longest, 1.0)
     segments, colours = [], []
     for k, branch in enumerate((u, v)):
         half = branch * scale
@@ -282,28 +457,114 @@ def _glyph_segments(points, u, v, lengths, arm):
     return np.concatenate(segments), np.concatenate(colours)
 
 
+def _wrap_title(title: str, fig_width: float) -> str:
+    """``title`` broken into lines that fit a figure ``fig_width`` inches wide."""
+    # About 0.6 em per character of DejaVu Sans; tests check that the result fits.
+    chars = max(16, int((fig_width - 0.3) * 72 / (0.6 * TITLE_FONTSIZE)))
+    return "\n".join(textwrap.wrap(title, chars, break_long_words=True))
+
+
+class FrameLayout(NamedTuple):
+    """Geometry of a :func:`plot_frames` figure (lengths in inches)."""
+
+    #: estimated; :func:`plot_frames` corrects it by the room labels really take
+    figsize: tuple[float, float]
+    #: the data area (domain + margin), drawn at equal aspect
+    axes_size: tuple[float, float]
+    #: data limits ((x0, x1), (y0, y1))
+    limits: tuple[tuple[float, float], tuple[float, float]]
+    #: inches per unit of length of the domain
+    scale: float
+    #: colour bar below the domain (wide domains) rather than on its right
+    horizontal: bool
+    #: the title, wrapped to the figure's width ("" for none)
+    title: str
+
+
+def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> FrameLayout:
+    """Figure geometry for a domain of bounding box [lo, hi] (:class:`FrameLayout`).
+
+    The data area has the domain's aspect ratio and :data:`AXES_AREA_IN2` square
+    inches, its longer side (horizontal or vertical, as the domain comes) capped by
+    :data:`AXES_LONG_MAX_IN`: an elongated domain gets a long figure, not a sliver in
+    a fixed-width one. The figure adds room for labels, the colour bar (below wide
+    domains, right of the others), the legend and the title, wrapped to its width,
+    and is at least :data:`FIGURE_MIN_IN`. Depends only on the shape: scaling the
+    domain (mm instead of m) changes nothing but ``scale``.
+    """
+    lo, hi = np.asarray(lo, dtype=float)[:2], np.asarray(hi, dtype=float)[:2]
+    extent = np.maximum(hi - lo, 1e-12 * max(float((hi - lo).max()), 1e-300))
+    # A margin from the geometric mean of the sides: a percentage of the longer side
+    # would double the width of a thin strip.
+    margin = 0.03 * math.sqrt(extent[0] * extent[1])
+    width, height = extent + 2 * margin
+    aspect = width / height
+    wide = aspect >= 1.0
+    long_side = min(math.sqrt(AXES_AREA_IN2 * max(aspect, 1 / aspect)),
+                    AXES_LONG_MAX_IN[0 if wide else 1])
+    axes_w, axes_h = (long_side, long_side / aspect) if wide else (long_side * aspect, long_side)
+    horizontal = aspect >= 1.4
+    # Room around the data area (inches): tick labels and axis labels, colour bar.
+    fig_w = axes_w + 0.85 + 0.25 + (0.0 if horizontal else 1.25)
+    fig_w = max(fig_w, FIGURE_MIN_IN[0])
+    text = _wrap_title(title, fig_w) if title else ""
+    lines = text.count("\n") + 1 if text else 0
+    fig_h = (axes_h + 0.6 + 0.2 + (0.95 if horizontal else 0.0) + (0.4 if legend else 0.0)
+             + lines * TITLE_FONTSIZE * 1.3 / 72)
+    fig_h = max(fig_h, FIGURE_MIN_IN[1])
+    return FrameLayout(
+        figsize=(round(fig_w, 2), round(fig_h, 2)),
+        axes_size=(axes_w, axes_h),
+        limits=((lo[0] - margin, hi[0] + margin), (lo[1] - margin, hi[1] + margin)),
+        scale=axes_w / width,
+        horizontal=horizontal,
+        title=text,
+    )
+
+
 _SINGULARITY_STYLE = {
     0.25: {"marker": "o", "color": "#d62728", "label": "+1/4"},
     -0.25: {"marker": "s", "color": "#1f77b4", "label": "−1/4"},
 }
 
 
-def _mark_singularities(ax, singularities) -> None:
+def _marker_size(count: int, domain_area_pt2: float) -> float:
+    """Marker area (points²) for ``count`` singularities on a domain of that drawn area.
+
+    80 for up to 20, then shrinking like count^(-3/4), and all markers together cover
+    at most 5% of the domain: thousands of singularities stay dots, not a carpet.
+    """
+    if count <= 0:
+        return 80.0
+    size = 80.0 * min(1.0, 20.0 / count) ** 0.75
+    return float(max(1.0, min(size, 0.05 * domain_area_pt2 / count)))
+
+
+def _mark_singularities(ax, singularities, domain_area_pt2, legend_columns) -> None:
     by_index = {}
     for s in singularities:
         by_index.setdefault(round(float(s["index"]) * 4) / 4, []).append((s["x"], s["y"]))
+    count = len(singularities)
+    size = _marker_size(count, domain_area_pt2)
+    many = count > MANY_SINGULARITIES
     for index, xy in sorted(by_index.items(), reverse=True):
         style = _SINGULARITY_STYLE.get(
             index, {"marker": "X", "color": "black", "label": f"{index:+g}"}
         )
         xy = np.asarray(xy)
         ax.scatter(
-            xy[:, 0], xy[:, 1], s=80, marker=style["marker"], facecolor=style["color"],
-            edgecolor="white", linewidth=1.2, zorder=4,
+            xy[:, 0], xy[:, 1], s=size, marker="o" if many else style["marker"],
+            facecolor=style["color"], edgecolor="none" if many else "white",
+            linewidth=0.0 if many else 1.2 * math.sqrt(size / 80.0), zorder=4,
             label=f"{style['label']} singularity ({len(xy)})",
         )
     if by_index:
-        ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+        # Above the domain, outside it: inside, it would hide part of a thin strip.
+        legend = ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), fontsize=8,
+                           frameon=False, ncols=min(len(by_index), legend_columns),
+                           borderaxespad=0.2)
+        for handle in legend.legend_handles:
+            handle.set_sizes([40.0])
 
 
 def plot_frames(
@@ -311,32 +572,54 @@ def plot_frames(
     q: fem.Function,
     title: str | None = None,
     singularities: list[dict] | None = None,
-    glyphs_across: int = GLYPHS_ACROSS,
+    glyphs_across: int | None = None,
     isotropic: bool | None = None,
+    *,
+    glyphs: int = GLYPHS,
+    dpi: int = DPI,
 ) -> None:
     """Figure of the frame field ``q`` (note Fig. 1) written to ``path`` by rank 0. Collective.
 
-    Crosses at the points of :func:`glyph_samples` (about ``glyphs_across`` across
-    the longer side), each drawn as the segments ±u and ±v: the longer arm has a fixed
-    size, the shorter one is in proportion (so anisotropy shows), and each arm is
-    coloured by its branch length (the colour bar gives the lengths; an isotropic
-    field, detected at the vertices unless ``isotropic`` is given, is drawn with
-    l1 = l2 = (l1 + l2)/2). ``singularities`` (``{"index", "x", "y"}``, e.g. from
-    :func:`ufl_frames.singularities.locate_singularities`) are marked.
+    Crosses at the points of :func:`glyph_samples` — about ``glyphs`` in the domain,
+    fewer where they would be closer than :data:`GLYPH_MIN_SPACING_IN` on paper
+    (``glyphs_across`` per longer side instead, if given) — each drawn as the
+    segments ±u and ±v: the longer arm has a fixed size (smaller near the boundary,
+    so that crosses do not hide holes), the shorter one is in proportion (so
+    anisotropy shows), and each arm is coloured by its branch length (the colour
+    bar gives the lengths; an isotropic field, detected at the vertices unless
+    ``isotropic`` is given, is drawn with l1 = l2 = (l1 + l2)/2). The boundary is
+    every boundary facet. ``singularities`` (``{"index", "x", "y"}``, e.g. from
+    :func:`ufl_frames.singularities.locate_singularities`) are marked, smaller the
+    more there are. Figure size: :func:`frame_layout`.
     """
     mesh = q.function_space.mesh
     comm = mesh.comm
+    singularities = singularities or []
     if isotropic is None:
         isotropic = _is_isotropic(q)
-    points, rows, spacing = glyph_samples(q, glyphs_across)
+    lo, hi = _bounding_box(mesh)
+    area = _domain_area(mesh)
+    layout = frame_layout(lo, hi, title, legend=bool(singularities))
+    if glyphs_across is None:
+        spacing = max(math.sqrt(area / glyphs), GLYPH_MIN_SPACING_IN / layout.scale)
+        points, rows, spacing = glyph_samples(q, spacing=spacing)
+    else:
+        points, rows, spacing = glyph_samples(q, glyphs_across)
     boundary = _gather_rows(comm, _boundary_segments(mesh))
     if comm.rank == 0:
-        _draw_frames(path, points, rows, spacing, boundary, title, singularities or [],
-                     isotropic)
+        fig = _frames_figure(layout, points, rows, spacing, boundary, area, singularities,
+                             isotropic)
+        _save(fig, path, dpi)
     comm.Barrier()
 
 
-def _draw_frames(path, points, rows, spacing, boundary, title, singularities, isotropic):
+def _save(fig, path, dpi) -> None:
+    """Write and close a figure (tests replace it to inspect the figure)."""
+    fig.savefig(path, dpi=dpi)
+    _pyplot().close(fig)
+
+
+def _frames_figure(layout, points, rows, spacing, boundary, area, singularities, isotropic):
     plt = _pyplot()
     from matplotlib.collections import LineCollection
 
@@ -345,35 +628,61 @@ def _draw_frames(path, points, rows, spacing, boundary, title, singularities, is
         mean = lengths.mean(axis=1, keepdims=True)
         scale = mean / np.where(lengths > 0, lengths, 1.0)
         u, v, lengths = u * scale[:, :1], v * scale[:, 1:], np.repeat(mean, 2, axis=1)
-    segments, colours = _glyph_segments(points, u, v, lengths, GLYPH_ARM * spacing)
+    arm = GLYPH_ARM * spacing
+    arms = np.clip(_distance_to_segments(points, boundary), GLYPH_MIN_ARM * arm, arm)
+    segments, colours = _glyph_segments(points, u, v, lengths, arms)
 
-    ends = boundary.reshape(-1, 2)
-    lo, hi = ends.min(axis=0), ends.max(axis=0)
-    extent = hi - lo
-    width = 7.0
-    height = max(3.0, min(9.0, (width - 1.8) * extent[1] / max(extent[0], 1e-300) + 0.9))
-    fig, ax = plt.subplots(figsize=(width, height), layout="constrained")
-    ax.add_collection(LineCollection(boundary, colors="0.15", linewidths=1.0, zorder=1))
-    glyphs = LineCollection(segments, cmap="viridis", linewidths=1.3, capstyle="round", zorder=2)
+    fig, ax = plt.subplots(figsize=layout.figsize, layout="constrained")
+    # Line widths in points follow the glyph spacing on paper: thick strokes would
+    # merge dense crosses into blobs.
+    spacing_pt = spacing * layout.scale * 72
+    # The boundary above the markers: a small hole stays visible under its singularities.
+    ax.add_collection(LineCollection(boundary, colors="0.15", zorder=5,
+                                     linewidths=float(np.clip(0.08 * spacing_pt, 0.5, 1.0))))
+    glyphs = LineCollection(segments, cmap="viridis", capstyle="round", zorder=2,
+                            linewidths=float(np.clip(0.11 * spacing_pt, 0.4, 1.3)))
     glyphs.set_array(colours)
     # A uniform field (an MBO field has unit lengths) gets a readable colour range.
     low, high = float(colours.min()), float(colours.max())
     middle, half = (low + high) / 2, max((high - low) / 2, 0.05 * abs(high + low) / 2, 1e-12)
     glyphs.set_clim(middle - half, middle + half)
     ax.add_collection(glyphs)
-    _mark_singularities(ax, singularities)
-    bar = fig.colorbar(glyphs, ax=ax, shrink=0.85, pad=0.02)
+    area_pt2 = area * (layout.scale * 72) ** 2
+    _mark_singularities(ax, singularities, area_pt2,
+                        legend_columns=max(1, int(layout.figsize[0] / 1.9)))
+    long_bar = layout.axes_size[0] if layout.horizontal else layout.axes_size[1]
+    bar = fig.colorbar(glyphs, ax=ax, location="bottom" if layout.horizontal else "right",
+                       shrink=min(0.85, 5.0 / long_bar), aspect=25, pad=0.02,
+                       # its room in inches, not in a fraction of the data area, so that
+                       # resizing the figure below does not resize the bar
+                       fraction=0.35 / (layout.axes_size[1] if layout.horizontal
+                                        else layout.axes_size[0]))
     bar.set_label("frame length $l_1 = l_2$" if isotropic else "branch length $l_1$, $l_2$")
-    margin = 0.04 * float(extent.max())
-    ax.set_xlim(lo[0] - margin, hi[0] + margin)
-    ax.set_ylim(lo[1] - margin, hi[1] + margin)
-    ax.set_aspect("equal")
+    ax.set_xlim(*layout.limits[0])
+    ax.set_ylim(*layout.limits[1])
     ax.set_xlabel("$x$")
     ax.set_ylabel("$y$")
-    if title:
-        ax.set_title(title)
-    fig.savefig(path, dpi=200)
-    plt.close(fig)
+    title = fig.suptitle(layout.title, fontsize=TITLE_FONTSIZE) if layout.title else None
+    # The room taken by labels, ticks, colour bar and title is only estimated by
+    # frame_layout: measure it on the laid-out figure and resize the figure to hold the
+    # planned data area exactly. Measured with a free aspect ratio: with an equal one the
+    # data area would not fill its box, and labels in the gap would count as no room.
+    ax.set_aspect("auto")
+    for _ in range(4):
+        fig.draw_without_rendering()
+        box = ax.get_position(original=True)
+        old = fig.get_size_inches()
+        needed = np.asarray(layout.axes_size) + (1 - np.array([box.width, box.height])) * old
+        # Where the minimum size wins (a very narrow domain, beside its title), the data
+        # area keeps its planned size and the figure has some white.
+        new = np.maximum(FIGURE_MIN_IN, needed)
+        if np.abs(new - old).sum() < 0.005:
+            break
+        fig.set_size_inches(*new)
+        if title is not None:
+            title.set_text(_wrap_title(layout.title, new[0]))
+    ax.set_aspect("equal")
+    return fig
 
 
 def plot_convergence(
@@ -416,11 +725,18 @@ def _draw_convergence(path, history, title):
     plt.close(fig)
 
 
-def describe_singularities(singularities: list[dict]) -> str:
-    """One-line text such as ``+1/4 at (0.35, 0.8), -1/4 at (1.57, 0.726)`` (or ``none``)."""
+def describe_singularities(singularities: list[dict], limit: int = DESCRIBE_LIMIT) -> str:
+    """One line: ``+1/4 at (0.35, 0.8), -1/4 at (1.57, 0.726)``, or ``none``.
+
+    More than ``limit`` singularities are counted per index instead, with the sum of
+    the indices (the Poincaré–Hopf check): ``+1/4: 1379, -1/4: 721, index sum 164.5``.
+    """
     if not singularities:
         return "none"
-    parts = []
-    for s in singularities:
-        parts.append(f"{round(float(s['index']) * 4):+d}/4 at ({s['x']:.3g}, {s['y']:.3g})")
-    return ", ".join(parts)
+    quarters = [round(float(s["index"]) * 4) for s in singularities]
+    if len(singularities) <= limit:
+        return ", ".join(f"{k:+d}/4 at ({s['x']:.3g}, {s['y']:.3g})"
+                         for k, s in zip(quarters, singularities, strict=True))
+    counts = {k: quarters.count(k) for k in sorted(set(quarters), reverse=True)}
+    parts = [f"{k:+d}/4: {n}" for k, n in counts.items()]
+    return ", ".join(parts) + f", index sum {sum(quarters) / 4:g}"

@@ -209,6 +209,7 @@ def frame_problem(
     isotropic: bool = False,
     pin_singularities: bool = True,
     max_aspect: float | None = None,
+    boundary_angles: np.ndarray | None = None,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
@@ -216,9 +217,13 @@ def frame_problem(
     ``pin_singularities`` the cross orientation is held at the vertices of the
     singular triangles of ``q`` (see :func:`projection.pin_singularities`). ``max_aspect``
     bounds l_max/l_min of non-isotropic frames (see :func:`odeco.clamp_aspect`).
+    ``boundary_angles``: exact boundary cross angles per local row (see
+    :func:`projection.frame_constraints`).
     """
     V = q.function_space
-    constraints = projection.frame_constraints(V, isotropic=isotropic, max_aspect=max_aspect)
+    constraints = projection.frame_constraints(
+        V, isotropic=isotropic, max_aspect=max_aspect, boundary_angles=boundary_angles
+    )
     if pin_singularities:
         constraints = projection.pin_singularities(V, constraints, q.x.array.reshape(-1, 5))
     H = energy.integrability_energy_form(q)
