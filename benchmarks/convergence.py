@@ -248,7 +248,7 @@ class MeshState:
 
     def __init__(self, comm, geometry_name, h):
         start = time.perf_counter()
-        mesh = geometry.build(comm, geometry_name, h)
+        mesh = geometry.build(comm, geometry_name, h).mesh
         self.q = mbo.mbo_frame_field(energy.frame_space(mesh))
         self.q0 = self.q.x.array.copy()
         self.cells = mesh.topology.index_map(2).size_global

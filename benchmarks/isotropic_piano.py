@@ -36,7 +36,7 @@ comm = MPI.COMM_WORLD
 say = print if comm.rank == 0 else (lambda *a, **k: None)
 say(f"{'h':>6} {'pinned':>7} {'its':>5} {'H':>10} {'rel |g|':>9} {'reason':<22} singularities")
 for h in args.sizes:
-    mesh = geometry.piano(comm, mesh_size=h)
+    mesh = geometry.piano(comm, mesh_size=h).mesh
     V = energy.frame_space(mesh)
     initial = mbo.mbo_frame_field(V)
     for pinned in (True, False):

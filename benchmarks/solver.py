@@ -132,7 +132,7 @@ def test_field(x):
 
 def bench_size(comm, h, args):
     start = time.perf_counter()
-    mesh = geometry.annulus(comm, mesh_size=h)
+    mesh = geometry.annulus(comm, mesh_size=h).mesh
     t_mesh = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     V = energy.frame_space(mesh)
     start = time.perf_counter()
@@ -250,7 +250,7 @@ def refinement_study(comm, args):
     tao_type = args.study_tao_type
     rows = []
     for h in args.study_sizes:
-        mesh = geometry.annulus(comm, mesh_size=h)
+        mesh = geometry.annulus(comm, mesh_size=h).mesh
         q = mbo.mbo_frame_field(energy.frame_space(mesh))
         problem = solver.frame_problem(q, isotropic=True)
         result = solver.solve(

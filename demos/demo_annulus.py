@@ -207,7 +207,7 @@ pg_max_it = 10 if CI else 200  # projected gradient iterations (fixed count)
 # `geometry.build` meshes the annulus with Gmsh (on rank 0) and distributes it.
 # The frame field lives in $[P_1]^5$.
 
-mesh = geometry.build(comm, "annulus", mesh_size)
+mesh = geometry.build(comm, "annulus", mesh_size).mesh
 V = energy.frame_space(mesh)
 num_vertices = mesh.topology.index_map(0).size_global
 say(f"annulus: {num_vertices} vertices, "

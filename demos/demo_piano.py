@@ -96,7 +96,7 @@ unbounded_it = 6 if CI else 40  # the run without aspect bound (a fixed count)
 
 # ### Mesh, initial field and its singularities
 
-mesh = geometry.build(comm, "piano", mesh_size)
+mesh = geometry.build(comm, "piano", mesh_size).mesh
 V = energy.frame_space(mesh)
 num_vertices = mesh.topology.index_map(0).size_global
 say(f"piano: {num_vertices} vertices, "

@@ -76,7 +76,7 @@ def _annulus_mesh(h: float, comm: MPI.Comm = MPI.COMM_WORLD) -> dolfinx.mesh.Mes
         build = geometry.annulus
     except (ImportError, AttributeError):
         return _gmsh_annulus(h, comm)
-    return build(comm, mesh_size=h, r_inner=R_INNER, r_outer=R_OUTER)
+    return build(comm, mesh_size=h, r_inner=R_INNER, r_outer=R_OUTER).mesh
 
 
 @pytest.fixture(scope="session")

@@ -89,7 +89,11 @@ def test_summary_keys_and_consistency(annulus_run):
     assert on_disk == json.loads(json.dumps(summary))
     assert SUMMARY_KEYS <= set(on_disk)
     assert on_disk["geometry"] == "annulus" and on_disk["isotropic"] is False
-    assert on_disk["mesh_size"] == 0.2 and on_disk["num_processes"] == COMM.size
+    assert on_disk["requested_mesh_size"] == 0.2 and on_disk["num_processes"] == COMM.size
+    # The mesh size reported is the mean edge length actually meshed, a bit under the cap.
+    assert 0.1 < on_disk["mesh_size"] <= 0.2
+    # The annulus: no singularity, and Poincaré–Hopf (χ = 0, no corners) agrees.
+    assert on_disk["poincare_hopf"]["agrees"] and on_disk["poincare_hopf"]["expected"] == 0
     assert on_disk["tao_type"] == solver.DEFAULT_OPTIONS["tao_type"] == "nls"
     assert on_disk["num_vertices"] > 50 and on_disk["num_cells"] > on_disk["num_vertices"]
     assert on_disk["H_final"] <= on_disk["H_initial"]

@@ -164,7 +164,7 @@ def moved(problem, x, s, w):
 
 @pytest.fixture(scope="module")
 def _annulus_solve():
-    mesh = geometry.build(COMM, "annulus", 0.1)
+    mesh = geometry.build(COMM, "annulus", 0.1).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solver.frame_problem(q, isotropic=True)
     result = solver.solve(problem, max_it=60, options_prefix="second_order_")
@@ -188,7 +188,7 @@ def annulus_solution(_annulus_solve):
 )
 def test_riemannian_gradient_matches_central_differences(name, isotropic):
     """g·d = d/dε H(R(x + εd)) on the MBO field (the piano: with pinned singular triangles)."""
-    mesh = geometry.build(COMM, name, 0.2)
+    mesh = geometry.build(COMM, name, 0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solver.frame_problem(
         q, isotropic=isotropic, pin_singularities=True, max_aspect=None if isotropic else 4.0
@@ -433,7 +433,7 @@ def test_exact_hessian_is_the_riemannian_hessian_at_a_critical_point():
     The pinned isotropic piano is a large-residual minimum (H ≈ 0.14 at h = 0.2) where the
     Gauss–Newton part alone is visibly off — checked too."""
     comm = MPI.COMM_WORLD
-    mesh = geometry.piano(comm, mesh_size=0.2)
+    mesh = geometry.piano(comm, mesh_size=0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solver.frame_problem(q, isotropic=True, pin_singularities=True)
     with petsc_defaults("crit_", {"tao_gttol": 1e-11, "tao_nls_ksp_rtol": 1e-12}):

@@ -6,7 +6,13 @@ import sys
 import numpy as np
 import pytest
 
-from ufl_frames.singularities import find_singularities, locate_singularities, triangle_indices
+from ufl_frames.singularities import (
+    find_singularities,
+    index_theorem,
+    locate_singularities,
+    poincare_hopf_sum,
+    triangle_indices,
+)
 
 
 def q_from_theta4(theta4, s=2.0):
@@ -220,3 +226,36 @@ def test_locate_rejects_scalar_space():
     f = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("Lagrange", 1)))
     with pytest.raises(ValueError, match="value shape"):
         locate_singularities(f)
+
+
+# --- Poincaré–Hopf ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "chi, corners_deg, expected",
+    [
+        (1, [], 1.0),  # disc: one +1 worth of quarter singularities inside
+        (0, [], 0.0),  # annulus
+        (-2, [], -2.0),  # disc with three holes
+        (1, [90] * 4, 0.0),  # rectangle: integrable, no singularity
+        (1, [90] * 5 + [270], 0.0),  # L-shape
+        (1, [60] * 3, 0.25),  # equilateral triangle: 60° rounds to one quarter turn
+        (1, [120] * 6, -0.5),  # regular hexagon: 120° rounds to one quarter turn too
+        (0, [240] * 6, 1.5),  # a hexagonal hole in a disc: reflex 240° → three
+        (1, [179, 181, 90, 90, 90, 90], 0.0),  # near-straight points count as straight
+    ],
+)
+def test_poincare_hopf_sum(chi, corners_deg, expected):
+    angles = np.radians(corners_deg)
+    assert poincare_hopf_sum(chi, angles) == expected
+    check = index_theorem([{"index": expected, "x": 0, "y": 0}], chi, angles)
+    assert check["agrees"] and check["index_sum"] == expected
+    assert check["corners"] == sum(1 for a in corners_deg if round(a / 90) != 2)
+    wrong = index_theorem([{"index": expected + 0.25, "x": 0, "y": 0}], chi, angles)
+    assert not wrong["agrees"]
+
+
+@pytest.mark.parametrize("bad", [[0.0], [-1.0], [2 * np.pi], [np.nan]])
+def test_poincare_hopf_rejects_bad_angles(bad):
+    with pytest.raises(ValueError, match="corner angles"):
+        poincare_hopf_sum(1, bad)

@@ -14,8 +14,9 @@ singularities → results in DIR (default ``out_<geometry stem>``):
 
 * ``summary.json`` — energies, iterations, TAO's converged reason, mesh size and
   counts, singularities, history (written last: its presence means a complete run);
-* ``frames.bp`` — the field for ParaView (``frames.xdmf`` without ADIOS2), see
-  :func:`ufl_frames.io.write_field`;
+* ``frames.bp`` — the field for ParaView (``frames.xdmf`` without ADIOS2) and the
+  same as ``frames.pvd`` (ASCII VTU, readable back with :func:`ufl_frames.io.read_vtk`),
+  see :func:`ufl_frames.io.write_field`;
 * ``frames.png`` — the crosses coloured by length (note Fig. 1);
 * ``convergence.png`` — H and E against the iteration (note Fig. 2).
 
@@ -42,7 +43,7 @@ from ufl_frames import __version__
 from ufl_frames.bootstrap import init_petsc
 
 PROG = "ufl-frames"
-DEFAULT_MESH_SIZE = 0.05
+DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.geometry.load
 DEFAULT_MAX_IT = 500
 DEFAULT_MAX_ASPECT = 4.0
 
@@ -103,7 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
         "solve",
         help="compute an integrable frame field on a geometry",
         description="Mesh GEOMETRY, build the MBO initial field, minimise the integrability "
-        "energy H with TAO and write summary.json, frames.bp, frames.png and "
+        "energy H with TAO and write summary.json, frames.bp/.pvd, frames.png and "
         "convergence.png to the output folder.",
         epilog="Any option with a single dash is passed to PETSc, e.g. -tao_type lmvm "
         "-tao_monitor -tao_max_it 50 -mbo_ksp_type cg; put them after GEOMETRY.",
@@ -113,8 +114,15 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--isotropic", action="store_true",
                        help="isotropic frames (l1 = l2, crosses); default: general frames")
     solve.add_argument("--mesh-size", type=_positive_float, default=DEFAULT_MESH_SIZE,
-                       metavar="H", help=f"target element size (default {DEFAULT_MESH_SIZE}; "
+                       metavar="H", help="largest element size, in the geometry's units "
+                       "(default: relative to the shape: 0.05 for the built-in shapes, a "
+                       "file's own sizes where it sets any, else about 2000 triangles; "
                        "ignored for .msh files)")
+    solve.add_argument("--size-factor", type=_positive_float, default=1.0, metavar="F",
+                       help="scale the mesh size, the default's or a file's own (< 1 refines)")
+    solve.add_argument("--max-triangles", type=_positive_float, default=None, metavar="N",
+                       help="refuse, before meshing, sizes estimated to give more triangles "
+                       "(default 4e6)")
     solve.add_argument("--max-it", type=_positive_int, default=DEFAULT_MAX_IT, metavar="N",
                        help=f"TAO iterations at most (default {DEFAULT_MAX_IT}; "
                        "-tao_max_it wins)")
@@ -304,7 +312,7 @@ def default_output_folder(geometry: str) -> Path:
 
 def _check_parameters(mesh_size, max_it) -> None:
     real = isinstance(mesh_size, (int, float)) and not isinstance(mesh_size, bool)
-    if not (real and math.isfinite(mesh_size) and mesh_size > 0):
+    if mesh_size is not None and not (real and math.isfinite(mesh_size) and mesh_size > 0):
         raise InputError(f"mesh size must be a positive number, got {mesh_size!r}")
     if isinstance(max_it, bool) or not isinstance(max_it, int) or max_it <= 0:
         raise InputError(f"max-it must be a positive integer, got {max_it!r}")
@@ -321,6 +329,8 @@ def run_solve(
     comm=None,
     max_aspect: float = DEFAULT_MAX_ASPECT,
     free_singularities: bool = False,
+    size_factor: float = 1.0,
+    max_triangles: float | None = None,
 ) -> dict:
     """Mesh → MBO → TAO → singularities → files in ``out``; return the summary (all ranks).
 
@@ -335,7 +345,7 @@ def run_solve(
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    from ufl_frames import energy, io, mbo, singularities, solver
+    from ufl_frames import energy, io, mbo, projection, singularities, solver
     from ufl_frames import geometry as geometry_module
 
     comm = MPI.COMM_WORLD if comm is None else comm
@@ -347,22 +357,28 @@ def run_solve(
     try:
         _check_parameters(mesh_size, max_it)
         check_output_folder(out, force, comm)
-        say(f"meshing {geometry} (mesh size {mesh_size:g}) ...")
-        mesh = geometry_module.build(comm, geometry, mesh_size)
+        size = "relative to the shape" if mesh_size is None else f"mesh size {mesh_size:g}"
+        say(f"meshing {geometry} ({size}) ...")
+        limit = {} if max_triangles is None else {"max_triangles": max_triangles}
+        domain = geometry_module.build(comm, geometry, mesh_size, size_factor, **limit)
+        mesh = domain.mesh
         V = energy.frame_space(mesh)
     except ValueError as e:  # raised identically on every rank
         if isinstance(e, InputError):
             raise
         raise InputError(str(e)) from e
-    num_vertices = mesh.topology.index_map(0).size_global
-    num_cells = mesh.topology.index_map(mesh.topology.dim).size_global
-    say(f"  {num_vertices} vertices, {num_cells} triangles, "
+    num_vertices, num_cells = domain.num_vertices, domain.num_cells
+    for note in domain.notes:
+        say(f"  note: {note}")
+    say(f"  {num_vertices} vertices, {num_cells} triangles (mean edge {domain.mesh_size:.3g}), "
         f"{comm.size} process{'es' if comm.size > 1 else ''}")
+    angles = domain.boundary_angles(V)
 
     with _OptionsSnapshot():
         say("MBO initial field ...")
         q = mbo.mbo_frame_field(
             V,
+            constraints=projection.frame_constraints(V, boundary_angles=angles),
             monitor=lambda level, tau, change: say(
                 f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}"
             ),
@@ -372,6 +388,7 @@ def run_solve(
             isotropic=isotropic,
             pin_singularities=not free_singularities,
             max_aspect=None if isotropic or math.isinf(max_aspect) else max_aspect,
+            boundary_angles=angles,
         )
         tao_type = PETSc.Options().getString("tao_type", solver.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
@@ -392,12 +409,21 @@ def run_solve(
 
     found = singularities.locate_singularities(problem.q)
     say(f"singularities: {io.describe_singularities(found)}")
+    index_check = singularities.index_theorem(
+        found, domain.euler_characteristic, [c.angle for c in domain.corners]
+    )
+    if not index_check["agrees"] and not quiet and comm.rank == 0:
+        print(f"{PROG}: warning: the singularities' indices sum to {index_check['index_sum']:g}, "
+              f"Poincaré–Hopf says {index_check['expected']:g} (Euler characteristic "
+              f"{domain.euler_characteristic}, {index_check['corners']} corners): the boundary "
+              "is too coarse for the field somewhere; try a smaller --mesh-size",
+              file=sys.stderr)
 
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
     label = f"{Path(geometry).stem}, {'isotropic' if isotropic else 'non-isotropic'}"
-    field_path = io.write_field(out, problem.q)
+    field_paths = io.write_field(out, problem.q)
     io.plot_frames(out / "frames.png", problem.q,
                    title=f"Frame field: {label} (H = {result.H_final:.3g})",
                    singularities=found)
@@ -410,7 +436,10 @@ def run_solve(
         "isotropic": bool(isotropic),
         "max_aspect": None if isotropic or math.isinf(max_aspect) else float(max_aspect),
         "pinned_singularities": not free_singularities,
-        "mesh_size": float(mesh_size),
+        "mesh_size": domain.mesh_size,
+        "requested_mesh_size": domain.requested_mesh_size,
+        "size_factor": float(size_factor),
+        "loader_notes": list(domain.notes),
         "max_it": int(max_it),
         "num_processes": comm.size,
         "num_vertices": int(num_vertices),
@@ -427,8 +456,11 @@ def run_solve(
         "wall_time_s": result.wall_time_s,
         "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
         "singularities": found,
+        "poincare_hopf": {**index_check, "corner_angles_deg": [
+            round(math.degrees(c.angle), 6) for c in domain.corners]},
         "history": result.history,
-        "files": [field_path.name, "frames.png", "convergence.png", "summary.json"],
+        "files": [p.name for p in field_paths] + ["frames.png", "convergence.png",
+                                                   "summary.json"],
     }
     io.write_summary(out / "summary.json", summary, comm=comm)
     say(f"wrote {out}/: {', '.join(summary['files'])}")
@@ -527,6 +559,8 @@ def main(argv: list[str] | None = None) -> int:
             comm=comm,
             max_aspect=args.max_aspect,
             free_singularities=args.free_singularities,
+            size_factor=args.size_factor,
+            max_triangles=args.max_triangles,
         )
     except InputError as e:  # raised on every rank alike (geometry, parameters, folder)
         return _fail(str(e), 1)

@@ -69,9 +69,18 @@ def _vertex_rows_of_facets(V, facets):
 
 
 def frame_constraints(
-    V, isotropic: bool = False, max_aspect: float | None = None
+    V,
+    isotropic: bool = False,
+    max_aspect: float | None = None,
+    boundary_angles: np.ndarray | None = None,
 ) -> FrameConstraints:
-    """Boundary rows, their normals and lumped-mass weights for the frame space ``V``."""
+    """Boundary rows, their normals and lumped-mass weights for the frame space ``V``.
+
+    The cross at a boundary vertex is aligned with the mesh's boundary edges (module
+    docstring), or, where ``boundary_angles`` (one angle per local row, NaN where
+    unknown; e.g. :meth:`ufl_frames.geometry.Domain.boundary_angles`) gives one, with
+    the CAD curve's exact tangent.
+    """
     mesh = V.mesh
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
@@ -98,6 +107,9 @@ def frame_constraints(
     boundary = np.flatnonzero(marker.array > 0).astype(np.int32)
     c, s = values[boundary, 0], values[boundary, 1]
     psi = np.arctan2(s, c) / 4
+    if boundary_angles is not None:
+        exact = np.asarray(boundary_angles, dtype=np.float64)[boundary]
+        psi = np.where(np.isfinite(exact), exact, psi)
     normals = np.stack([np.cos(psi), np.sin(psi)], axis=1)
 
     # Lumped mass ∫ φ_v dx of every vertex, read off the first component of the blocked space.

@@ -19,7 +19,13 @@ when called.
 
 import numpy as np
 
-__all__ = ["find_singularities", "locate_singularities", "triangle_indices"]
+__all__ = [
+    "find_singularities",
+    "index_theorem",
+    "locate_singularities",
+    "poincare_hopf_sum",
+    "triangle_indices",
+]
 
 
 def _wrap(delta: np.ndarray) -> np.ndarray:
@@ -111,3 +117,32 @@ def locate_singularities(q_function) -> list[dict]:
     local = find_singularities(cell_dofs[:owned], coords[: q.shape[0]], q)
     found = [s for part in mesh.comm.allgather(local) for s in part]
     return sorted(found, key=lambda s: (s["x"], s["y"], s["index"]))
+
+
+def poincare_hopf_sum(euler_characteristic: int, corner_angles) -> float:
+    """χ − Σ_c (2 − k_c)/4, k_c = round(α_c / (π/2)): what the interior indices of a
+    boundary-aligned cross field sum to (module docstring); α_c in radians."""
+    angles = np.asarray(corner_angles, dtype=np.float64).ravel()
+    if not np.all(np.isfinite(angles)) or np.any(angles <= 0) or np.any(angles >= 2 * np.pi):
+        raise ValueError("corner angles must lie in (0, 2π)")
+    quarter_turns = np.rint(angles / (np.pi / 2))
+    return float(euler_characteristic - np.sum(2 - quarter_turns) / 4) + 0.0
+
+
+def index_theorem(singularities: list[dict], euler_characteristic: int, corner_angles) -> dict:
+    """The index sum of ``singularities`` against :func:`poincare_hopf_sum`.
+
+    Returns ``{"index_sum", "expected", "agrees", "euler_characteristic", "corners"}``
+    (``corners``: how many corners contribute, i.e. whose angle is not 180° rounded).
+    Indices are multiples of 1/4, so the sums are compared exactly after rounding.
+    """
+    angles = np.asarray(corner_angles, dtype=np.float64).ravel()
+    index_sum = float(np.rint(4 * sum(float(s["index"]) for s in singularities)) / 4) + 0.0
+    expected = poincare_hopf_sum(euler_characteristic, angles)
+    return {
+        "index_sum": index_sum,
+        "expected": expected,
+        "agrees": bool(index_sum == expected),
+        "euler_characteristic": int(euler_characteristic),
+        "corners": int(np.count_nonzero(np.rint(angles / (np.pi / 2)) != 2)),
+    }
