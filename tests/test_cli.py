@@ -359,3 +359,44 @@ def test_cli_error_under_mpirun_is_reported_once(tmp_path):
     )
     assert_one_line_error(proc, 1)
     assert list(tmp_path.iterdir()) == []
+
+
+# The issue's disc (circles through a centre point) with two holes, and a second surface
+# sharing a curve that asks for quadrilaterals: what real .geo files look like.
+REAL_GEO = """Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {0, 1, 0};
+Point(4) = {-1, 0, 0}; Point(5) = {0, -1, 0};
+Circle(1) = {2, 1, 3}; Circle(2) = {3, 1, 4}; Circle(3) = {4, 1, 5}; Circle(4) = {5, 1, 2};
+Point(6) = {0.4, 0, 0}; Point(7) = {0.6, 0, 0}; Point(8) = {0.4, 0.2, 0};
+Point(9) = {0.2, 0, 0}; Point(10) = {0.4, -0.2, 0};
+Circle(5) = {7, 6, 8}; Circle(6) = {8, 6, 9}; Circle(7) = {9, 6, 10}; Circle(8) = {10, 6, 7};
+Point(20) = {-0.4, 0.3, 0}; Point(21) = {-0.3, 0.3, 0}; Point(22) = {-0.4, 0.4, 0};
+Point(23) = {-0.5, 0.3, 0}; Point(24) = {-0.4, 0.2, 0};
+Circle(20) = {21, 20, 22}; Circle(21) = {22, 20, 23}; Circle(22) = {23, 20, 24};
+Circle(23) = {24, 20, 21};
+Curve Loop(1) = {1, 2, 3, 4}; Curve Loop(2) = {5, 6, 7, 8}; Curve Loop(3) = {20, 21, 22, 23};
+Plane Surface(1) = {1, 2, 3};
+Point(12) = {1, -1, 0}; Point(13) = {2, -1, 0}; Point(14) = {2, 0, 0};
+Line(9) = {5, 12}; Line(10) = {12, 13}; Line(11) = {13, 14}; Line(12) = {14, 2};
+Curve Loop(4) = {9, 10, 11, 12, -4}; Plane Surface(2) = {4};
+Recombine Surface{2};
+"""
+
+
+def test_run_solve_on_a_real_geo_file(shared_tmp):
+    path = shared_tmp / "real.geo"
+    if COMM.rank == 0:
+        path.write_text(REAL_GEO)
+    COMM.Barrier()
+    summary = cli.run_solve(str(path), mesh_size=0.15, max_it=10, out=shared_tmp / "out",
+                            quiet=True, comm=COMM)
+    notes = " ".join(summary["loader_notes"])
+    assert "no triangle uses" in notes and "quadrilaterals split" in notes
+    check = summary["poincare_hopf"]
+    # χ = 1 − 2 holes. Corners: (2, −1) and (2, 0) convex right angles (+1/4 each), (1, 0)
+    # reflex, where the top side meets the disc (−1/4); (0, −1) is tangential, (1, −1)
+    # straight. So −1 − (1/4 + 1/4 − 1/4).
+    assert check["euler_characteristic"] == -1 and check["corners"] == 3
+    assert check["expected"] == -1.25
+    assert check["agrees"], summary["singularities"]
+    assert summary["requested_mesh_size"] == 0.15
+    assert summary["mesh_size"] <= 0.15

@@ -259,3 +259,15 @@ def test_poincare_hopf_sum(chi, corners_deg, expected):
 def test_poincare_hopf_rejects_bad_angles(bad):
     with pytest.raises(ValueError, match="corner angles"):
         poincare_hopf_sum(1, bad)
+
+
+def test_index_theorem_with_ambiguous_corners():
+    """A 135° corner: the cross may turn by +45° or −45° there; both sums are right."""
+    angles = np.radians([135, 135, 90])
+    check = index_theorem([], 1, angles)
+    assert check["ambiguous_corners"] == 2 and check["corners"] == 1
+    # Rounded down, 135° is one quarter turn: 1 − 3/4; rounded up, two: 1 − 1/4.
+    assert check["expected"] == 0.25
+    agrees = [index_theorem([{"index": 0.25 + d, "x": 0, "y": 0}], 1, angles)["agrees"]
+              for d in (-0.25, 0, 0.25, 0.5, 0.75)]
+    assert agrees == [False, True, True, True, False]

@@ -716,8 +716,10 @@ def _mesh_arrays(source: str, notes: list[str]) -> _Arrays:
               | (cells[:, 0] == cells[:, 2])):
         raise GeometryError(f"{source!r} has triangles with a repeated node")
     area = _signed_areas(x, cells)
-    extent = float(np.ptp(x, axis=0).max())
-    degenerate = np.abs(area) <= 1e-12 * extent * extent
+    # Degenerate by shape, not by size: graded meshes have tiny good triangles.
+    longest = np.max([np.sum((x[cells[:, i]] - x[cells[:, (i + 1) % 3]]) ** 2, axis=1)
+                      for i in range(3)], axis=0)
+    degenerate = np.abs(area) <= 1e-10 * longest
     if degenerate.any():
         raise GeometryError(f"{source!r} has {int(degenerate.sum())} zero-area triangles")
     cells = np.where((area < 0)[:, None], cells[:, [0, 2, 1]], cells)
