@@ -22,7 +22,11 @@ with steps 4–5 as the retraction R. Here TAO runs it:
 
 TAO supplies the search direction (``-tao_type``), the line search (``-tao_ls_type``)
 and the stopping tests (``-tao_gttol``: relative gradient norm, default 1e-6;
-``-tao_gatol``, ``-tao_max_it``):
+``-tao_gatol``, ``-tao_fmin``, ``-tao_max_it``). The defaults of the last two are
+relative to the natural scales of H, not absolute (:attr:`FrameProblem.energy_scale`):
+a field that is already integrable, or already stationary, stops at iteration 0
+(``CONVERGED_MINF`` / ``CONVERGED_GATOL``) instead of running ``max_it`` Newton steps
+on round-off. TAO types:
 
 * ``nls`` (default), ``ntr``, ``bnls``, ``bntr``: Newton line search / trust region on
   the model of :class:`GaussNewtonModel` — the exact Riemannian Hessian for isotropic
@@ -52,14 +56,20 @@ from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames import energy, odeco, projection  # noqa: E402
 
-#: TAO defaults (each overridable from the command line).
+#: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
+#: ``-tao_fmin`` are not here: their defaults depend on the problem (see :func:`solve`).
 DEFAULT_OPTIONS = {
     "tao_type": "nls",  # Riemannian Gauss–Newton (GaussNewtonModel); the note's method: bncg
-    "tao_gatol": 1e-12,
     "tao_grtol": 0.0,
     "tao_gttol": 1e-6,  # |g| / |g_0|: the relative Riemannian gradient norm
     "tao_max_funcs": 1_000_000,
 }
+
+#: Default ``-tao_fmin`` relative to :attr:`FrameProblem.energy_scale`: H ≥ 0, so a field
+#: with H below it is integrable (|[u, v]| ≲ 1e-8 of its natural size) and a solve has
+#: nothing left to do. Far above the H that MBO leaves on straight-sided domains (~1e-21:
+#: its KSP tolerance), far below any discretisation error (the annulus at h = 0.1: 1e-3).
+ENERGY_RTOL = 1e-16
 
 #: Defaults that apply to one TAO type only.
 TYPE_OPTIONS = {
@@ -92,6 +102,8 @@ class FrameProblem:
     gradient: fem.Form
     dirichlet: fem.Form
     norm2: float
+    #: The domain's area, Σ_v m_v.
+    area: float
     sqrt_mass: np.ndarray = field(repr=False)
     #: The last assembled dH/dq, scaled (local rows): decides the active aspect bounds.
     last_gradient: np.ndarray | None = field(default=None, repr=False)
@@ -106,6 +118,26 @@ class FrameProblem:
     @property
     def owned(self) -> int:
         return self.constraints.owned
+
+    @property
+    def energy_scale(self) -> float:
+        """H_s = (ρ²/A)², ρ² = Σ m_v |q_v|², A the area: H of a field turning by O(1) across
+        the domain, up to an O(1) factor (MBO's on the annulus: H = 1.4 H_s).
+
+        Homogeneous of degree 4 in q like H, and, like H, independent of the mesh and of
+        the domain's size (x → s x: ρ² and A scale by s², H is invariant).
+        """
+        return (self.norm2 / self.area) ** 2
+
+    @property
+    def gradient_scale(self) -> float:
+        """G = H_s / ρ: the scale of the Riemannian gradient norm |g| in the unknowns x.
+
+        |g| ρ bounds the first-order change of H under a relative change 1 of the field
+        (x·∇H = 4H), so |g| / G, like H / H_s, is free of the mesh and of the domain's
+        size (|g| scales by 1/s under x → s x, as G does). MBO on the annulus: |g| ≈ 25-35 G.
+        """
+        return self.energy_scale / np.sqrt(self.norm2)
 
     def set_from_x(self, x: PETSc.Vec) -> None:
         """q ← R(x / √m): unscale, fill ghosts, project pointwise, normalise (steps 4–5)."""
@@ -234,6 +266,8 @@ def frame_problem(
         gradient=fem.form(energy.gradient_form(H, q)),
         dirichlet=fem.form(energy.dirichlet_energy_form(q)),
         norm2=1.0,
+        area=constraints.comm.allreduce(float(constraints.weights[: constraints.owned].sum()),
+                                        op=MPI.SUM),
         sqrt_mass=np.sqrt(constraints.weights),
     )
     q.x.array[:] = projection.project_rows(problem.rows, constraints).ravel()
@@ -291,9 +325,12 @@ class GaussNewtonModel:
     * λ (K + M): Levenberg–Marquardt damping in the H¹ metric. H has a large family
       of minimisers (integrable fields are far from unique), so JᵀJ is singular;
       an L² (identity) damping lets the steps excite rough null directions, an H¹
-      damping keeps them smooth. λ = λ₀ max(r, min(1, |g|/|g₀|)) · mean|q|² decreases
-      with the gradient down to the floor r (``-frames_gn_damping λ₀``, default 1;
-      ``-frames_gn_damping_min r``, default 1e-3). Without a floor the Newton systems
+      damping keeps them smooth. λ = λ₀ max(r, min(1, |g|/max(|g₀|, G))) · mean|q|²
+      decreases with the gradient down to the floor r (``-frames_gn_damping λ₀``,
+      default 1; ``-frames_gn_damping_min r``, default 1e-3). G is
+      :attr:`FrameProblem.gradient_scale`: from an already nearly stationary start (a
+      restart, |g₀| ≪ G) the damping starts near its floor instead of at its largest
+      (|g|/|g₀| = 1), and |g₀| = 0 is no 0/0. Without a floor the Newton systems
       become singular and the Krylov iterations explode (measured: 85 Newton steps and
       ~70 s against 35 steps and ~3 s with r = 1e-3 on the annulus at h = 0.05).
 
@@ -350,7 +387,9 @@ class GaussNewtonModel:
         G.assemble()
         G.diagonalScale(self.unscale, self.unscale)
         if self.gnorm0 is None and gnorm is not None:
-            self.gnorm0 = gnorm  # the first Hessian is at the initial iterate
+            # The first Hessian is at the initial iterate. Its gradient is no reference
+            # when the start is already (nearly) stationary: the natural scale then is.
+            self.gnorm0 = max(gnorm, problem.gradient_scale)
         n = problem.owned
         scale = problem.constraints.comm.allreduce(
             float(np.einsum("ni,ni->", problem.rows[:n], problem.rows[:n])), op=MPI.SUM
@@ -425,12 +464,28 @@ def solve(
 
     ``max_it`` is a default for ``-tao_max_it`` (the command line wins). ``monitor``
     receives each history entry ``{"it", "H", "E", "gnorm", "step"}`` (on every rank).
+
+    Two defaults are relative to the scales of ``problem`` (given values are absolute):
+
+    * ``-tao_fmin`` = :data:`ENERGY_RTOL` · H_s: an integrable field (H = 0 up to the
+      accuracy of the initial field) ends with ``CONVERGED_MINF``;
+    * ``-tao_gatol`` = gttol · G: the gradient test is |g| ≤ gttol · max(|g₀|, G), so a
+      start that is already stationary ends with ``CONVERGED_GATOL``. TAO's own gttol
+      test compares with |g₀| only, which, at a stationary start, is round-off: its
+      target (1e-6 of that) is out of reach and the solve ran to ``max_it``. G, not an
+      absolute number, because the gradient norm depends on the domain's size.
+
+    Both are tested by TAO before the first step, for every TAO type (0 iterations).
     """
     options = {**DEFAULT_OPTIONS, **(defaults or {})}
-    tao_type = PETSc.Options(options_prefix).getString("tao_type", options["tao_type"])
+    opts = PETSc.Options(options_prefix)
+    tao_type = opts.getString("tao_type", options["tao_type"])
     options.update(TYPE_OPTIONS.get(tao_type, {}))
     if max_it is not None:
         options["tao_max_it"] = max_it
+    gttol = opts.getReal("tao_gttol", float(options["tao_gttol"]))
+    options.setdefault("tao_gatol", gttol * problem.gradient_scale)
+    options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
         return _solve(problem, tao_type, options_prefix, monitor)
 
