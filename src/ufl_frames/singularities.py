@@ -141,8 +141,8 @@ def index_theorem(singularities: list[dict], euler_characteristic: int, corner_a
     "ambiguous_corners"}``. ``corners`` counts the corners that contribute (angle not
     180° rounded); ``ambiguous_corners`` those near an odd multiple of 45° (45°, 135°,
     225°, 315°), where either rounding is right: ``expected`` is the lower sum (their k
-    rounded down) and each widens the agreement by 1/4 above it. Indices are multiples of 1/4, so sums
-    are compared exactly after rounding.
+    rounded down) and each widens the agreement by 1/4 above it. Indices are multiples
+    of 1/4, so sums are compared exactly after rounding.
     """
     angles = np.asarray(corner_angles, dtype=np.float64).ravel()
     index_sum = float(np.rint(4 * sum(float(s["index"]) for s in singularities)) / 4) + 0.0
