@@ -204,8 +204,9 @@ pg_max_it = 10 if CI else 200  # projected gradient iterations (fixed count)
 
 # ### Mesh and initial field
 #
-# `geometry.build` meshes the annulus with Gmsh (on rank 0) and distributes it.
-# The frame field lives in $[P_1]^5$.
+# `geometry.build` meshes the annulus with Gmsh (on rank 0) and distributes it; it
+# returns a `Domain` (the mesh, its boundary curves and corners, the Euler
+# characteristic). The frame field lives in $[P_1]^5$.
 
 mesh = geometry.build(comm, "annulus", mesh_size).mesh
 V = energy.frame_space(mesh)
