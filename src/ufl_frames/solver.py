@@ -349,6 +349,14 @@ class GaussNewtonModel:
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix, so ``-tao_nls_pc_type`` / ``-tao_ntr_pc_type``
     (gamg, hypre, lu, ...) act on it.
+
+    TAO's Hessian perturbation (``nls``, ``bnls``: ``MatShift`` by ``pert`` after each
+    Hessian evaluation) shifts both: the shell (:meth:`shift`, so the shell is B + pert·I)
+    and, because it is a different matrix, the pre-matrix too (B's sparse part + pert·I,
+    its preconditioner). :meth:`mult` therefore applies an unshifted copy of the assembled
+    part (:attr:`unshifted`, refreshed with every assembly), not the pre-matrix: applying
+    the shifted pre-matrix and then adding the shell's own shift gave B + pert (I + S),
+    the perturbation twice on every tangent direction.
     """
 
     def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0,
@@ -375,6 +383,7 @@ class GaussNewtonModel:
         self.xhat, self.work = template.duplicate(), template.duplicate()
         self.mu, self.shift_value, self.lam, self.gnorm0 = 1.0, 0.0, 0.0, None
         self.tangent = self.normal = self.curvature = None  # block-diagonal, reused
+        self.unshifted = None  # copy of the pre-matrix that TAO's MatShift does not reach
         self.assembled = self._assemble(None, gnorm=None)  # pattern only: TAO calls update
         self.shell = PETSc.Mat().createPython(self.assembled.getSizes(), comm=template.comm)
         self.shell.setPythonContext(self)
@@ -423,6 +432,12 @@ class GaussNewtonModel:
             H = problem.energy() if problem.last_energy is None else problem.last_energy
             self.sphere = 4 * H / self.xhat.dot(self.xhat)
         self.xhat.normalize()
+        # TAO shifts the pre-matrix (``result``) in place; the shell's product must not see
+        # that shift, it adds its own (``shift_value``) exactly once.
+        if self.unshifted is None:
+            self.unshifted = result.duplicate(copy=True)
+        else:
+            result.copy(self.unshifted, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self.shift_value = 0.0
         return result
 
@@ -433,9 +448,10 @@ class GaussNewtonModel:
 
     # MatShell interface
     def mult(self, mat, v, y):
+        """y = B v + shift·v; the unshifted assembled part, whatever TAO did to the pre-matrix."""
         along = self.xhat.dot(v)
         self.work.waxpy(-along, self.xhat, v)
-        self.assembled.mult(self.work, y)
+        self.unshifted.mult(self.work, y)
         if self.sphere:
             y.axpy(-self.sphere, self.work)
         y.axpy(self.mu * along - self.xhat.dot(y), self.xhat)
@@ -443,12 +459,14 @@ class GaussNewtonModel:
             y.axpy(self.shift_value, v)
 
     def shift(self, mat, a):
+        """MatShift on the shell: B + a·I from now on (until the next assembly)."""
         self.shift_value += a
 
     def free(self):
         """Destroy the PETSc objects (not named ``destroy``: MatPython calls that one)."""
-        for obj in (self.shell, self.assembled, self.gauss_newton, self.sobolev, self.unscale,
-                    self.xhat, self.work, self.tangent, self.normal, self.curvature):
+        for obj in (self.shell, self.assembled, self.unshifted, self.gauss_newton, self.sobolev,
+                    self.unscale, self.xhat, self.work, self.tangent, self.normal,
+                    self.curvature):
             if obj is not None:
                 obj.destroy()
 
