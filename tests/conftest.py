@@ -12,34 +12,60 @@ Modelled on DOLFINx's ``python/test/conftest.py``:
 ``annulus_mesh`` (a fixture returning a function ``annulus_mesh(h, comm)``) builds the
 annulus 0.5 <= r <= 1 with :func:`ufl_frames.geometry.annulus`, or with Gmsh directly when
 that module is not available.
+
+Nothing here needs DOLFINx, petsc4py or mpi4py to be importable: the pure NumPy tests
+(``make test-pure``: odeco, bracket, aspect, the NumPy side of singularities) run in a
+virtual environment without them. Each is imported where it is used; without mpi4py
+there is one process and no barrier, without petsc4py there is no options database to
+restore, and ``annulus_mesh`` skips the tests that ask for it when DOLFINx is missing.
 """
+
+from __future__ import annotations
 
 import gc
 import os
 import sys
+from typing import TYPE_CHECKING
 
 # One BLAS thread per process, as in the Makefile (effective if NumPy is not loaded yet):
 # threaded OpenBLAS makes small dot products ~1000x slower on a loaded machine.
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
-from ufl_frames.bootstrap import init_petsc
-
-# pytest's own command line (-q, -m "not serial", -k ...) is not for PETSc.
-init_petsc(sys.argv[:1])
-
-import dolfinx  # noqa: E402
-import dolfinx.io.gmsh  # noqa: E402
 import pytest  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-from petsc4py import PETSc  # noqa: E402
+
+from ufl_frames.bootstrap import init_petsc  # noqa: E402  (pure Python)
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx
+    from mpi4py import MPI
+
+# Where petsc4py exists, initialise it now, before any test module imports mpi4py or
+# DOLFINx (the order ufl_frames.bootstrap requires), with pytest's own command line
+# (-q, -m "not serial", -k ...) kept away from PETSc. This imports petsc4py only, not
+# PETSc and not DOLFINx; in an environment without petsc4py it does nothing.
+try:
+    init_petsc(sys.argv[:1])
+    HAVE_PETSC = True
+except ImportError:
+    HAVE_PETSC = False
 
 R_INNER = 0.5
 R_OUTER = 1.0
 
 
+def _mpi():
+    """``mpi4py.MPI``, or None where mpi4py is not installed (one process, no MPI)."""
+    try:
+        from mpi4py import MPI
+    except ImportError:
+        return None
+    return MPI
+
+
 def _gmsh_annulus(h: float, comm: MPI.Comm) -> dolfinx.mesh.Mesh:
     """Fallback annulus: OCC disk minus disk, meshed on rank 0 of ``comm``, distributed."""
+    import dolfinx.io.gmsh
     import gmsh
 
     owns = not gmsh.isInitialized()
@@ -68,8 +94,11 @@ def _gmsh_annulus(h: float, comm: MPI.Comm) -> dolfinx.mesh.Mesh:
     return data.mesh
 
 
-def _annulus_mesh(h: float, comm: MPI.Comm = MPI.COMM_WORLD) -> dolfinx.mesh.Mesh:
-    """Triangle mesh of the annulus 0.5 <= r <= 1 with mesh size ``h``, distributed on ``comm``."""
+def _annulus_mesh(h: float, comm: MPI.Comm | None = None) -> dolfinx.mesh.Mesh:
+    """Triangle mesh of the annulus 0.5 <= r <= 1 with mesh size ``h``, distributed on ``comm``
+    (default ``MPI.COMM_WORLD``)."""
+    if comm is None:
+        comm = _mpi().COMM_WORLD
     try:
         from ufl_frames import geometry
 
@@ -82,6 +111,7 @@ def _annulus_mesh(h: float, comm: MPI.Comm = MPI.COMM_WORLD) -> dolfinx.mesh.Mes
 @pytest.fixture(scope="session")
 def annulus_mesh():
     """``annulus_mesh(h, comm=MPI.COMM_WORLD)`` -> mesh of the annulus 0.5 <= r <= 1."""
+    pytest.importorskip("dolfinx")
     return _annulus_mesh
 
 
@@ -90,12 +120,19 @@ def _collective_cleanup():
     """gc.collect() and a barrier after each test (collective destructors in step)."""
     yield
     gc.collect()
-    MPI.COMM_WORLD.Barrier()
+    MPI = _mpi()
+    if MPI is not None:
+        MPI.COMM_WORLD.Barrier()
 
 
 @pytest.fixture(autouse=True)
 def _restore_petsc_options():
     """Put the global PETSc options database back as it was before the test."""
+    if not HAVE_PETSC:
+        yield
+        return
+    from petsc4py import PETSc
+
     opts = PETSc.Options()
     before = opts.getAll()
     yield
@@ -109,7 +146,8 @@ def _restore_petsc_options():
 
 def pytest_collection_modifyitems(config, items):
     """Skip tests marked ``serial`` when running on more than one MPI rank."""
-    if MPI.COMM_WORLD.size == 1:
+    MPI = _mpi()
+    if MPI is None or MPI.COMM_WORLD.size == 1:
         return
     skip = pytest.mark.skip(reason="serial test: skipped under MPI")
     for item in items:
