@@ -3,7 +3,7 @@ r"""Derive the Lie-bracket tensor C of note eq. (10) symbolically, and write it 
     [u, v]_i = C_ijkl q_l ∂q_j/∂x_k                                   (note eq. 10)
 
 for u = l1 (cos t, sin t), v = l2 (−sin t, cos t) (positively oriented frame), in the
-harmonic basis of :mod:`ufl_frames.odeco`. Reference bracket (NOTES §3, from the
+harmonic basis of :mod:`ufl_frames.odeco`. Reference bracket (note-checks §3, from the
 definition [u, v] = ∇_u v − ∇_v u):
 
     [u,v] = l1 (û·∇l2) v̂ − l1 l2 (û·∇t) û − l2 (v̂·∇l1) û − l1 l2 (v̂·∇t) v̂
@@ -12,7 +12,7 @@ Method: q(s, d, t) on the variety and its gradient ∂q = q_s ∇s + q_d ∇d + 
 substituted into C_ijkl q_l ∂_k q_j; requiring equality with the reference for all
 s, d, t, ∇s, ∇d, ∇t gives linear equations for the 100 entries of C (coefficients of
 each monomial and each Fourier mode e^{int}). The solution set is an affine space
-of dimension 12 (the derivatives q^T A_m ∂_k q of the variety equations, NOTES §3).
+of dimension 12 (the derivatives q^T A_m ∂_k q of the variety equations, note-checks §3).
 We pick the minimum-Frobenius-norm solution: it is the unique solution orthogonal
 to that null space, so it adds no multiple of the variety equations, which are
 not zero off the variety (inside elements and during steps); see the energy tests

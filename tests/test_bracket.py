@@ -1,4 +1,4 @@
-"""Tests of the Lie-bracket tensor (note eq. 10, NOTES §3): :mod:`ufl_frames.bracket`.
+"""Tests of the Lie-bracket tensor (note eq. 10, note-checks §3): :mod:`ufl_frames.bracket`.
 
 The gradient of q is computed exactly by the chain rule from q(s, d, t) (s = l1 + l2,
 d = l1 − l2) and the gradients of the lengths and the angle; the reference bracket
@@ -55,7 +55,7 @@ def bracket_scale(lengths, grad_lengths, grad_angles):
 
 
 def null_space_tensors():
-    """The 12 tensors N with N_ijkl q_l ∂_k q_j = δ_i,i0 q^T A_m ∂_k0 q (NOTES §3)."""
+    """The 12 tensors N with N_ijkl q_l ∂_k q_j = δ_i,i0 q^T A_m ∂_k0 q (note-checks §3)."""
     out = []
     for i0 in range(2):
         for k0 in range(2):
@@ -170,7 +170,7 @@ def test_direct_formula_matches_finite_differences():
 
 @pytest.mark.parametrize("integrable", [True, False])
 def test_annulus_fields(integrable):
-    """NOTES §4: u = g(r) e_r, v = f(r) e_θ has [u, v] = g (f' − f/r) e_θ; zero iff f = c r."""
+    """note-checks §4: u = g(r) e_r, v = f(r) e_θ: [u, v] = g (f' − f/r) e_θ, zero iff f = c r."""
     rng = np.random.default_rng(4)
     r = rng.uniform(0.5, 2.0, 300)
     theta = rng.uniform(-np.pi, np.pi, 300)
@@ -244,7 +244,7 @@ def test_null_space_terms_vanish_on_the_variety():
     got = np.einsum("ijkl,nl,njk->ni", other, q, grad_q)
     want = bracket.lie_bracket(q, grad_q)
     assert np.all(np.abs(got - want) <= 1e-12 * scale[:, :, 0])
-    # ... but not off it (NOTES §3: the choice matters inside elements).
+    # ... but not off it (note-checks §3: the choice matters inside elements).
     q_off = q + 0.1 * np.linalg.norm(q, axis=1, keepdims=True) * rng.standard_normal(q.shape)
     off = np.einsum("ijkl,nl,njk->ni", other, q_off, grad_q) - bracket.lie_bracket(q_off, grad_q)
     assert np.abs(off).max() > 1e-3 * scale.max()

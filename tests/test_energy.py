@@ -3,9 +3,9 @@ r"""The discrete energies of :mod:`ufl_frames.energy` against independent truth.
 Exact values come from hand calculations with explicit frames, never from the package:
 
 * unit isotropic frames at angle t: u = û, v = v̂ and [u, v] = −(û·∇t) û − (v̂·∇t) v̂
-  (NOTES §3, l1 = l2 = 1), so |[u, v]| = |∇t|. For t = φ + k r on the annulus
+  (note-checks §3, l1 = l2 = 1), so |[u, v]| = |∇t|. For t = φ + k r on the annulus
   0.5 ≤ r ≤ 1: |∇t|² = 1/r² + k², H = ½ ∫∫ (1/r² + k²) r dr dφ = π ln 2 + 3π k²/8.
-* u = e_r, v = f(r) e_θ: [u, v] = (f' − f/r) e_θ (NOTES §4); f = r² gives [u, v] = r e_θ
+* u = e_r, v = f(r) e_θ: [u, v] = (f' − f/r) e_θ (note-checks §4); f = r² gives [u, v] = r e_θ
   and H = ½ ∫∫ r³ dr dφ = π (1 − 1/16)/4 = 15π/64.
 * integrable fields (H = 0): (g(r) e_r, c r e_θ), (c r e_r, c r e_θ), and the coordinate
   fields a(U) ∂_U, b(V) ∂_V of a conformal map z = F(w), w = U + iV (parabolic: F = w²/2,
@@ -277,7 +277,7 @@ def test_gradient_matches_finite_differences(annulus_meshes, which):
 
 
 def bracket_with_null_term(q, alpha):
-    """[u, v] of eq. (10) with C + ΔC, ΔC_ijkl = Σ_mk α_imk (A_m)_jl (NOTES §3 null space).
+    """[u, v] of eq. (10) with C + ΔC, ΔC_ijkl = Σ_mk α_imk (A_m)_jl (note-checks §3 null space).
 
     ΔC contributes Σ α_imk q^T A_m ∂_k q to component i: zero where q is on the variety
     (at the vertices), not inside the P1 elements. ``alpha`` is a Constant of shape (2, 3, 2).
@@ -330,7 +330,7 @@ ANNULUS_INTEGRABLE = [
 
 @pytest.mark.parametrize("name, f", ANNULUS_INTEGRABLE)
 def test_every_bracket_tensor_agrees_in_the_limit(annulus_meshes, name, f):
-    """NOTES §3: C + ΔC, ΔC in the null space, gives another H_h with the same limit H = 0."""
+    """note-checks §3: C + ΔC, ΔC in the null space, gives another H_h with the same limit H = 0."""
     (alpha_value,) = random_null_alphas(1)
     hs, energies = [], []
     for mesh in annulus_meshes:
@@ -346,7 +346,7 @@ def test_every_bracket_tensor_agrees_in_the_limit(annulus_meshes, name, f):
 
 @pytest.mark.parametrize("name, f", ANNULUS_INTEGRABLE)
 def test_minimum_norm_bracket_gives_smaller_residual(annulus_meshes, name, f):
-    """NOTES §3: a typical null-space element added to the minimum-norm C raises the residual.
+    """note-checks §3: a typical null-space element added to the minimum-norm C raises the residual.
 
     Null-space elements ΔC of Frobenius norm ‖C‖/2 in random directions (fixed seed) on the
     integrable annulus field at h = 0.05; prints the residuals. Measured: the minimum-norm

@@ -17,7 +17,7 @@ pairs, relative to the longer branch) and |Δq|/|q|:
                       0.9 < l2/l1 < 1.1        2.0e-04 rad, 0.15, 0.13
                       all others               8.7e-06 rad, 9.2e-06, 1.0e-05
     (Mandel: the two leading eigenvectors are an arbitrary basis of their span when
-    l1 ≈ l2, so the lengths are not recovered at all; NOTES §2.)
+    l1 ≈ l2, so the lengths are not recovered at all; note-checks §2.)
 """
 
 import os
@@ -172,7 +172,7 @@ def test_frames_to_q_is_the_harmonic_expansion_of_the_frame_polynomial(frames):
     scale = lengths.max(axis=1, keepdims=True)
     np.testing.assert_allclose(q @ harmonics(phi).T / scale, p / scale, atol=1e-14)
     np.testing.assert_allclose(q / scale, q_by_quadrature(lengths, angles) / scale, atol=1e-14)
-    # The documented closed form (module docstring, NOTES §1).
+    # The documented closed form (module docstring, note-checks §1).
     s, d = lengths.sum(axis=1), lengths[:, 0] - lengths[:, 1]
     closed = np.stack(
         [
@@ -558,7 +558,7 @@ def test_bad_input_raises_value_error(call, message):
         call()
 
 
-# --- robustness (NOTES §2) ------------------------------------------------------------
+# --- robustness (note-checks §2) ------------------------------------------------------------
 
 
 def _robustness_errors(q_true, q_noisy, method):
@@ -594,7 +594,7 @@ def test_projection_robust_to_perturbations():
     assert direction < 1e-4
     assert length < 1e-4
     assert dq < 1e-5
-    # The note's eigentensor projection is not stable near isotropy (NOTES §2).
+    # The note's eigentensor projection is not stable near isotropy (note-checks §2).
     direction_m, length_m, dq_m = measured["mandel"]
     assert max(direction_m, length_m, dq_m) > 1e3 * max(direction, length, dq)
     assert length_m > 0.1  # lengths near isotropy are not recovered at all

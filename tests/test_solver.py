@@ -1,6 +1,6 @@
 r"""The TAO frame-field solver (:mod:`ufl_frames.solver`) on the annulus.
 
-Truth (NOTES §4): the integrable annulus fields aligned with the boundary are
+Truth (note-checks §4): the integrable annulus fields aligned with the boundary are
 (g(r) e_r, c r e_θ) with any radial g, and isotropic ones (c r e_r, c r e_θ). So from
 the MBO cross field (the e_r, e_θ cross with unit lengths) the solver must
 

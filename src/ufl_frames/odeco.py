@@ -33,7 +33,7 @@ projection, and the remaining function of θ = 4t is a trigonometric polynomial 
 degree 2, maximised by safeguarded Newton iterations from the maximisers of its two
 harmonics. This is the exact closest point — exact on Odeco inputs, isotropic ones
 included — unlike the note's Mandel-eigenvector projection (``method="mandel"``),
-which is kept for comparison and is unstable near isotropy (see NOTES §2).
+which is kept for comparison and is unstable near isotropy (see note-checks §2).
 
 No DOLFINx here: every function takes and returns NumPy arrays of shape (N, 5).
 """
@@ -165,7 +165,7 @@ def tangent_project(q, dq) -> np.ndarray:
     """Project steps ``dq`` onto the tangent spaces of the variety at ``q`` (note §3, step 2).
 
     The normal space at q is spanned by the gradients A_m q of the three equations,
-    which have rank 2 only (the variety is 3-dimensional in R⁵, NOTES §1), so the
+    which have rank 2 only (the variety is 3-dimensional in R⁵, note-checks §1), so the
     normals are orthonormalised by a singular value decomposition (singular values
     below a relative 1e-5 are discarded) before they are removed.
     """
