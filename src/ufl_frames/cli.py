@@ -335,9 +335,9 @@ def run_solve(
     """Mesh → MBO → TAO → singularities → files in ``out``; return the summary (all ranks).
 
     Collective over ``comm`` (default ``MPI.COMM_WORLD``). Raises :class:`InputError`
-    (a ``ValueError``; e.g. for a :class:`ufl_frames.geometry.GeometryError`, a bad
-    parameter, an existing non-empty ``out``) on every rank, before anything is
-    computed or written, when the input is unusable.
+    (for a :class:`ufl_frames.geometry.GeometryError`, a bad parameter, an existing
+    non-empty ``out``) on every rank, before anything is computed or written, when the
+    input is unusable; other exceptions are bugs or failures and keep their type.
     PETSc options in the database (``-tao_type`` ...) are honoured; the defaults the
     solvers add to the database are removed afterwards.
     """
@@ -345,8 +345,9 @@ def run_solve(
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    from ufl_frames import energy, io, mbo, projection, singularities, solver
     from ufl_frames import geometry as geometry_module
+    from ufl_frames import io, solver
+    from ufl_frames.pipeline import FrameField, aspect_bound
 
     comm = MPI.COMM_WORLD if comm is None else comm
     say = _printer(comm, quiet)
@@ -354,47 +355,33 @@ def run_solve(
     user_options = PETSc.Options().getAll()
     geometry = str(geometry)
     out = default_output_folder(geometry) if out is None else Path(out)
+    _check_parameters(mesh_size, max_it)
+    check_output_folder(out, force, comm)
+    size = "relative to the shape" if mesh_size is None else f"mesh size {mesh_size:g}"
+    say(f"meshing {geometry} ({size}) ...")
+    limit = {} if max_triangles is None else {"max_triangles": max_triangles}
     try:
-        _check_parameters(mesh_size, max_it)
-        check_output_folder(out, force, comm)
-        size = "relative to the shape" if mesh_size is None else f"mesh size {mesh_size:g}"
-        say(f"meshing {geometry} ({size}) ...")
-        limit = {} if max_triangles is None else {"max_triangles": max_triangles}
         domain = geometry_module.build(comm, geometry, mesh_size, size_factor, **limit)
-        mesh = domain.mesh
-        V = energy.frame_space(mesh)
-    except ValueError as e:  # raised identically on every rank
-        if isinstance(e, InputError):
-            raise
+    except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
-    num_vertices, num_cells = domain.num_vertices, domain.num_cells
     for note in domain.notes:
         say(f"  note: {note}")
-    say(f"  {num_vertices} vertices, {num_cells} triangles (mean edge {domain.mesh_size:.3g}), "
-        f"{comm.size} process{'es' if comm.size > 1 else ''}")
-    angles = domain.boundary_angles(V)
+    say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
+        f"{domain.mesh_size:.3g}), {comm.size} process{'es' if comm.size > 1 else ''}")
 
     with _OptionsSnapshot():
         say("MBO initial field ...")
-        q = mbo.mbo_frame_field(
-            V,
-            constraints=projection.frame_constraints(V, boundary_angles=angles),
+        field = FrameField.initial(
+            domain, isotropic=isotropic, max_aspect=max_aspect,
             monitor=lambda level, tau, change: say(
                 f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}"
             ),
         )
-        problem = solver.frame_problem(
-            q,
-            isotropic=isotropic,
-            pin_singularities=not free_singularities,
-            max_aspect=None if isotropic or math.isinf(max_aspect) else max_aspect,
-            boundary_angles=angles,
-        )
         tao_type = PETSc.Options().getString("tao_type", solver.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
         say(f"solving ({kind}, TAO {tao_type}) ...")
-        result = solver.solve(
-            problem,
+        result = field.solve(
+            pin_singularities=not free_singularities,
             max_it=max_it,
             monitor=lambda e: say(
                 f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
@@ -407,11 +394,8 @@ def run_solve(
     if not converged and not quiet and comm.rank == 0:
         print(f"{PROG}: warning: TAO stopped with {result.converged_reason}", file=sys.stderr)
 
-    found = singularities.locate_singularities(problem.q)
-    say(f"singularities: {io.describe_singularities(found)}")
-    index_check = singularities.index_theorem(
-        found, domain.euler_characteristic, [c.angle for c in domain.corners]
-    )
+    say(f"singularities: {io.describe_singularities(field.singularities)}")
+    index_check = field.index_theorem()
     if not index_check["agrees"] and not quiet and comm.rank == 0:
         print(f"{PROG}: warning: the singularities' indices sum to {index_check['index_sum']:g}, "
               f"Poincaré–Hopf says {index_check['expected']:g} (Euler characteristic "
@@ -422,19 +406,12 @@ def run_solve(
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
-    label = f"{Path(geometry).stem}, {'isotropic' if isotropic else 'non-isotropic'}"
-    field_paths = io.write_field(out, problem.q)
-    io.plot_frames(out / "frames.png", problem.q,
-                   title=f"Frame field: {label} (H = {result.H_final:.3g})",
-                   singularities=found)
-    io.plot_convergence(out / "convergence.png", result.history,
-                        title=f"{label}: {result.iterations} iterations, TAO {tao_type}",
-                        comm=comm)
+    files = field.write(out, label=Path(geometry).stem, tao_type=tao_type) + ["summary.json"]
     summary = {
         "ufl_frames_version": __version__,
         "geometry": geometry,
         "isotropic": bool(isotropic),
-        "max_aspect": None if isotropic or math.isinf(max_aspect) else float(max_aspect),
+        "max_aspect": aspect_bound(isotropic, max_aspect),
         "pinned_singularities": not free_singularities,
         "mesh_size": domain.mesh_size,
         "requested_mesh_size": domain.requested_mesh_size,
@@ -442,8 +419,8 @@ def run_solve(
         "loader_notes": list(domain.notes),
         "max_it": int(max_it),
         "num_processes": comm.size,
-        "num_vertices": int(num_vertices),
-        "num_cells": int(num_cells),
+        "num_vertices": int(domain.num_vertices),
+        "num_cells": int(domain.num_cells),
         "tao_type": tao_type,
         "petsc_options": user_options,
         "converged_reason": result.converged_reason,
@@ -455,15 +432,13 @@ def run_solve(
         "E_final": result.E_final,
         "wall_time_s": result.wall_time_s,
         "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
-        "singularities": found,
-        "poincare_hopf": {**index_check, "corner_angles_deg": [
-            round(math.degrees(c.angle), 6) for c in domain.corners]},
+        "singularities": field.singularities,
+        "poincare_hopf": index_check,
         "history": result.history,
-        "files": [p.name for p in field_paths] + ["frames.png", "convergence.png",
-                                                   "summary.json"],
+        "files": files,
     }
     io.write_summary(out / "summary.json", summary, comm=comm)
-    say(f"wrote {out}/: {', '.join(summary['files'])}")
+    say(f"wrote {out}/: {', '.join(files)}")
     return summary
 
 

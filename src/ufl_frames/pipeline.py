@@ -1,0 +1,122 @@
+"""The pipeline as one object: a meshed domain, its frame field, the solve and its findings.
+
+::
+
+    domain = geometry.build(comm, "piano")                    # Domain: mesh, curves, corners
+    field = FrameField.initial(domain, isotropic=False)       # the smooth MBO cross field
+    field.solve(max_it=500)                                   # TAO on the frame manifold
+    field.singularities, field.index_theorem()                # indices, Poincaré–Hopf
+    field.write("out_piano", label="piano")                   # ParaView files, figures
+
+:class:`FrameField` is what the CLI, the demos and the benchmarks consume (and what a
+parametrisation will): the boundary directions of the CAD model reach the MBO field and
+the solver's constraints from one place, and the aspect bound's rule (none for
+isotropic frames) lives here once.
+"""
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import dolfinx.fem as fem  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ufl_frames import energy, io, mbo, projection, singularities, solver  # noqa: E402
+from ufl_frames.geometry import Domain  # noqa: E402
+
+__all__ = ["FrameField", "aspect_bound"]
+
+
+def aspect_bound(isotropic: bool, max_aspect: float | None) -> float | None:
+    """The bound l_max/l_min ≤ A the solver gets: None for isotropic frames (l1 = l2
+    already) and for an infinite or missing A."""
+    if isotropic or max_aspect is None or math.isinf(max_aspect):
+        return None
+    return float(max_aspect)
+
+
+@dataclass
+class FrameField:
+    """A frame field on a :class:`~ufl_frames.geometry.Domain`, and what was done to it.
+
+    ``q`` is the P1 field (5 coefficients per vertex); ``boundary_angles`` the exact
+    boundary cross angles of the CAD model per local row (None without one);
+    ``problem`` and ``result`` are set by :meth:`solve`; ``singularities`` are those of
+    the current ``q`` (``{"index", "x", "y"}``, the same list on every rank).
+    """
+
+    domain: Domain
+    q: fem.Function
+    isotropic: bool = False
+    max_aspect: float | None = None
+    boundary_angles: np.ndarray | None = field(default=None, repr=False)
+    problem: solver.FrameProblem | None = field(default=None, repr=False)
+    result: solver.SolveResult | None = None
+    singularities: list[dict] = field(default_factory=list)
+
+    @classmethod
+    def initial(
+        cls,
+        domain: Domain,
+        isotropic: bool = False,
+        max_aspect: float | None = 4.0,
+        monitor=None,
+    ) -> "FrameField":
+        """The smooth boundary-aligned MBO cross field on ``domain`` (collective).
+
+        ``monitor(level, tau, change)`` as for :func:`ufl_frames.mbo.mbo_frame_field`.
+        """
+        V = energy.frame_space(domain.mesh)
+        angles = domain.boundary_angles(V)
+        constraints = projection.frame_constraints(V, boundary_angles=angles)
+        q = mbo.mbo_frame_field(V, constraints=constraints, monitor=monitor)
+        return cls(domain=domain, q=q, isotropic=isotropic,
+                   max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
+                   singularities=singularities.locate_singularities(q))
+
+    def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
+              options_prefix: str = "") -> solver.SolveResult:
+        """Minimise H from the current field with TAO (:func:`ufl_frames.solver.solve`);
+        ``q`` holds the result, ``singularities`` are found again (collective)."""
+        self.problem = solver.frame_problem(
+            self.q, isotropic=self.isotropic, pin_singularities=pin_singularities,
+            max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
+        )
+        self.result = solver.solve(self.problem, max_it=max_it, monitor=monitor,
+                                   options_prefix=options_prefix)
+        self.singularities = singularities.locate_singularities(self.q)
+        return self.result
+
+    def index_theorem(self) -> dict:
+        """The singularities' index sum against Poincaré–Hopf for the domain
+        (:func:`ufl_frames.singularities.index_theorem`), with the corner angles (°)."""
+        corners = self.domain.corners
+        check = singularities.index_theorem(
+            self.singularities, self.domain.euler_characteristic, [c.angle for c in corners]
+        )
+        check["corner_angles_deg"] = [round(math.degrees(c.angle), 6) for c in corners]
+        return check
+
+    def write(self, out, label: str, tao_type: str | None = None) -> list[str]:
+        """The field for ParaView, ``frames.png`` and (after a solve) ``convergence.png``
+        into the existing folder ``out``; the names written (collective)."""
+        out = Path(out)
+        kind = "isotropic" if self.isotropic else "non-isotropic"
+        names = [p.name for p in io.write_field(out, self.q)]
+        H = f" (H = {self.result.H_final:.3g})" if self.result is not None else ""
+        io.plot_frames(out / "frames.png", self.q, title=f"Frame field: {label}, {kind}{H}",
+                       singularities=self.singularities)
+        names.append("frames.png")
+        if self.result is not None:
+            method = f", TAO {tao_type}" if tao_type else ""
+            io.plot_convergence(
+                out / "convergence.png", self.result.history,
+                title=f"{label}, {kind}: {self.result.iterations} iterations{method}",
+                comm=self.domain.comm,
+            )
+            names.append("convergence.png")
+        return names
