@@ -131,17 +131,10 @@ def _restore_petsc_options():
     if not HAVE_PETSC:
         yield
         return
-    from petsc4py import PETSc
+    from ufl_frames.bootstrap import options_scope
 
-    opts = PETSc.Options()
-    before = opts.getAll()
-    yield
-    after = opts.getAll()
-    for name in after.keys() - before.keys():
-        opts.delValue(name)
-    for name, value in before.items():
-        if after.get(name) != value:
-            opts.setValue(name, value)
+    with options_scope():
+        yield
 
 
 def pytest_collection_modifyitems(config, items):

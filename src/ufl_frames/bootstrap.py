@@ -13,15 +13,31 @@ with their ``argv``, so that PETSc reads the command line (a library import must
 parse the command line of whatever program imported it, pytest's for instance).
 """
 
+import warnings
 from contextlib import contextmanager
 
 _initialised = False
 
 
+def petsc_initialised() -> bool:
+    """Whether :func:`init_petsc` has run in this process."""
+    return _initialised
+
+
 def init_petsc(argv: list[str] | None = None) -> None:
-    """Initialise petsc4py with ``argv`` (default: no options) once per process."""
+    """Initialise petsc4py with ``argv`` (default: no options) once per process.
+
+    Later calls do nothing; options in their ``argv`` (beyond the program name) are not
+    read then, which is said with a :class:`RuntimeWarning` (use :func:`options_scope`
+    to put options in the database of a running PETSc).
+    """
     global _initialised
     if _initialised:
+        if argv is not None and len(argv) > 1:
+            warnings.warn(
+                f"PETSc is already initialised: options {' '.join(argv[1:])!r} are not read; "
+                "use ufl_frames.bootstrap.options_scope", RuntimeWarning, stacklevel=2,
+            )
         return
     try:
         import dolfinx_solver  # noqa: F401  (loads MPI for the binary wheel)
@@ -51,3 +67,30 @@ def petsc_defaults(prefix: str, defaults: dict):
     finally:
         for key in added:
             opts.delValue(key)
+
+
+@contextmanager
+def options_scope(options=()):
+    """Put ``options`` (``(name, value or None)`` pairs, no leading dash) in the global
+    PETSc options database, and on exit put the whole database back as it was: what
+    was added inside is removed, what was changed restored.
+
+    The one mechanism for the database besides :func:`petsc_defaults` (which only adds
+    defaults): the CLI scopes a run's command-line options and the solvers' defaults
+    with it, the tests each test, so nothing leaks into the next solve in the process.
+    """
+    from petsc4py import PETSc
+
+    db = PETSc.Options()
+    before = db.getAll()
+    for name, value in options:
+        db.setValue(name, value)
+    try:
+        yield db
+    finally:
+        after = db.getAll()
+        for name in after.keys() - before.keys():
+            db.delValue(name)
+        for name, value in before.items():
+            if after.get(name) != value:
+                db.setValue(name, value)

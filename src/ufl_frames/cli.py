@@ -40,7 +40,7 @@ import time
 from pathlib import Path
 
 from ufl_frames import __version__
-from ufl_frames.bootstrap import init_petsc
+from ufl_frames.bootstrap import init_petsc, options_scope, petsc_initialised
 
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.geometry.load
@@ -195,63 +195,6 @@ def _petsc_argv(options: list[tuple[str, str | None]]) -> list[str]:
     return argv
 
 
-# --- PETSc options database ---------------------------------------------------------
-
-_MISSING = object()
-
-
-def _set_options(options: list[tuple[str, str | None]]) -> dict:
-    """Put ``options`` in the PETSc database if not there; return what to undo."""
-    from petsc4py import PETSc
-
-    db = PETSc.Options()
-    before = db.getAll()
-    undo = {}
-    for name, value in options:
-        if name not in before or before[name] != value:
-            undo.setdefault(name, before.get(name, _MISSING))
-            db.setValue(name, value)
-    return undo
-
-
-def _restore_options(undo: dict) -> None:
-    from petsc4py import PETSc
-
-    db = PETSc.Options()
-    for name, value in undo.items():
-        if value is _MISSING:
-            db.delValue(name)
-        else:
-            db.setValue(name, value)
-
-
-class _OptionsSnapshot:
-    """Context manager: undo every change made to the PETSc options database inside it.
-
-    The solvers set their defaults in the global database (only where the user gave
-    none); without this, a second run in the same process would inherit the first
-    run's defaults (e.g. its ``tao_max_it``).
-    """
-
-    def __enter__(self):
-        from petsc4py import PETSc
-
-        self.before = PETSc.Options().getAll()
-        return self
-
-    def __exit__(self, *exc):
-        from petsc4py import PETSc
-
-        db = PETSc.Options()
-        now = db.getAll()
-        for name, value in now.items():
-            if name not in self.before:
-                db.delValue(name)
-            elif self.before[name] != value:
-                db.setValue(name, self.before[name])
-        return False
-
-
 # --- output -----------------------------------------------------------------------------
 
 
@@ -369,7 +312,7 @@ def run_solve(
     say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
         f"{domain.mesh_size:.3g}), {comm.size} process{'es' if comm.size > 1 else ''}")
 
-    with _OptionsSnapshot():
+    with options_scope():  # the solvers' defaults end with the run
         say("MBO initial field ...")
         field = FrameField.initial(
             domain, isotropic=isotropic, max_aspect=max_aspect,
@@ -512,45 +455,44 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as e:
         return _fail(str(e), 2)
 
-    # PETSc reads its options now, before anything imports dolfinx.
-    init_petsc([PROG, *_petsc_argv(options)])
+    # PETSc reads its options now, before anything imports dolfinx (start-up options such
+    # as -log_view work only so); called in-process, options_scope puts them in below.
+    if not petsc_initialised():
+        init_petsc([PROG, *_petsc_argv(options)])
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
     if args.command == "info":
         return _info(comm)
 
-    # Already initialised (main called in-process): put the options in, take them out after.
-    undo = _set_options(options)
-    try:
-        run_solve(
-            args.geometry,
-            isotropic=args.isotropic,
-            mesh_size=args.mesh_size,
-            max_it=args.max_it,
-            out=args.out,
-            force=args.force,
-            quiet=args.quiet,
-            comm=comm,
-            max_aspect=args.max_aspect,
-            free_singularities=args.free_singularities,
-            size_factor=args.size_factor,
-            max_triangles=args.max_triangles,
-        )
-    except InputError as e:  # raised on every rank alike (geometry, parameters, folder)
-        return _fail(str(e), 1)
-    except Exception:
-        # Unexpected: keep the traceback. One rank failing alone would leave the others
-        # waiting in a collective call, so abort the whole job.
-        if comm.size > 1:
-            import traceback
+    with options_scope(options):  # this run's options, removed afterwards
+        try:
+            run_solve(
+                args.geometry,
+                isotropic=args.isotropic,
+                mesh_size=args.mesh_size,
+                max_it=args.max_it,
+                out=args.out,
+                force=args.force,
+                quiet=args.quiet,
+                comm=comm,
+                max_aspect=args.max_aspect,
+                free_singularities=args.free_singularities,
+                size_factor=args.size_factor,
+                max_triangles=args.max_triangles,
+            )
+        except InputError as e:  # raised on every rank alike (geometry, parameters, folder)
+            return _fail(str(e), 1)
+        except Exception:
+            # Unexpected: keep the traceback. One rank failing alone would leave the others
+            # waiting in a collective call, so abort the whole job.
+            if comm.size > 1:
+                import traceback
 
-            traceback.print_exc()
-            sys.stderr.flush()
-            comm.Abort(1)
-        raise
-    finally:
-        _restore_options(undo)
+                traceback.print_exc()
+                sys.stderr.flush()
+                comm.Abort(1)
+            raise
     return 0
 
 
