@@ -20,6 +20,7 @@ The linear solves use a PETSc KSP with options prefix ``mbo_`` (``-mbo_ksp_type`
 """
 
 import math
+from contextlib import ExitStack
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
@@ -87,43 +88,47 @@ def mbo_frame_field(
     q_prev = fem.Function(V)
     L = fem.form(ufl.inner(q_prev, w) * ufl.dx)
 
-    A = dolfinx.fem.petsc.create_matrix(a)
-    rhs = dolfinx.fem.petsc.create_vector(V)
-    ksp = PETSc.KSP().create(mesh.comm)
-    ksp.setOptionsPrefix(options_prefix)
-    ksp.setOperators(A)
-    with petsc_defaults(options_prefix, {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-10}):
-        ksp.setFromOptions()
+    # A, rhs and the KSP are destroyed however the loop ends (a failed solve, a monitor that
+    # raises), in reverse order of creation on every rank: the destroys are collective.
+    with ExitStack() as owned:
+        A = dolfinx.fem.petsc.create_matrix(a)
+        owned.callback(A.destroy)
+        rhs = dolfinx.fem.petsc.create_vector(V)
+        owned.callback(rhs.destroy)
+        ksp = PETSc.KSP().create(mesh.comm)
+        owned.callback(ksp.destroy)
+        ksp.setOptionsPrefix(options_prefix)
+        ksp.setOperators(A)
+        defaults = {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-10}
+        with petsc_defaults(options_prefix, defaults):
+            ksp.setFromOptions()
 
-    rows = q.x.array.reshape(-1, 5)
-    interior = constraints.interior
-    for level, tau_value in enumerate(diffusion_schedule(mesh, levels)):
-        tau.value = tau_value
-        A.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(A, a, bcs=[bc])
-        A.assemble()
-        change = 0.0
-        for _ in range(sweeps):
-            q_prev.x.array[:] = q.x.array
-            with rhs.localForm() as local:
-                local.set(0.0)
-            dolfinx.fem.petsc.assemble_vector(rhs, L)
-            dolfinx.fem.petsc.apply_lifting(rhs, [a], bcs=[[bc]])
-            rhs.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            dolfinx.fem.petsc.set_bc(rhs, [bc])
-            ksp.solve(rhs, q.x.petsc_vec)
-            if ksp.getConvergedReason() < 0:
-                raise RuntimeError(
-                    f"MBO diffusion solve failed (KSP reason {ksp.getConvergedReason()}); "
-                    f"try other -{options_prefix}ksp_type / -{options_prefix}pc_type"
-                )
-            q.x.scatter_forward()
-            rows[interior] = _unit_isotropic(rows[interior])
-            local = float(np.abs(rows - q_prev.x.array.reshape(-1, 5)).max(initial=0.0))
-            change = mesh.comm.allreduce(local, op=MPI.MAX)
-        if monitor is not None:
-            monitor(level, tau_value, change)
-    ksp.destroy()
-    A.destroy()
-    rhs.destroy()
+        rows = q.x.array.reshape(-1, 5)
+        interior = constraints.interior
+        for level, tau_value in enumerate(diffusion_schedule(mesh, levels)):
+            tau.value = tau_value
+            A.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(A, a, bcs=[bc])
+            A.assemble()
+            change = 0.0
+            for _ in range(sweeps):
+                q_prev.x.array[:] = q.x.array
+                with rhs.localForm() as local:
+                    local.set(0.0)
+                dolfinx.fem.petsc.assemble_vector(rhs, L)
+                dolfinx.fem.petsc.apply_lifting(rhs, [a], bcs=[[bc]])
+                rhs.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+                dolfinx.fem.petsc.set_bc(rhs, [bc])
+                ksp.solve(rhs, q.x.petsc_vec)
+                if ksp.getConvergedReason() < 0:
+                    raise RuntimeError(
+                        f"MBO diffusion solve failed (KSP reason {ksp.getConvergedReason()}); "
+                        f"try other -{options_prefix}ksp_type / -{options_prefix}pc_type"
+                    )
+                q.x.scatter_forward()
+                rows[interior] = _unit_isotropic(rows[interior])
+                local = float(np.abs(rows - q_prev.x.array.reshape(-1, 5)).max(initial=0.0))
+                change = mesh.comm.allreduce(local, op=MPI.MAX)
+            if monitor is not None:
+                monitor(level, tau_value, change)
     return q

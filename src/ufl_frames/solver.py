@@ -40,6 +40,7 @@ gave no value, and ``setFromOptions`` comes last.
 """
 
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
@@ -359,10 +360,24 @@ class GaussNewtonModel:
     the perturbation twice on every tangent direction.
     """
 
+    #: The PETSc objects the model owns (destroyed by :meth:`free`).
+    _OWNED = ("shell", "assembled", "unshifted", "gauss_newton", "sobolev", "unscale", "xhat",
+              "work", "tangent", "normal", "curvature")
+
     def __init__(self, problem: FrameProblem, template: PETSc.Vec, damping: float = 1.0,
                  damping_min: float = 1e-3, exact: bool = False):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.exact, self.sphere = exact, 0.0
+        for name in self._OWNED:
+            setattr(self, name, None)
+        try:
+            self._create(template)
+        except BaseException:
+            self.free()  # what was created before the error (collective, as the creation was)
+            raise
+
+    def _create(self, template: PETSc.Vec) -> None:
+        problem, exact = self.problem, self.exact
         if exact:
             H = energy.integrability_energy_form(problem.q)
             V = problem.q.function_space
@@ -382,8 +397,8 @@ class GaussNewtonModel:
         self.sobolev.diagonalScale(self.unscale, self.unscale)
         self.xhat, self.work = template.duplicate(), template.duplicate()
         self.mu, self.shift_value, self.lam, self.gnorm0 = 1.0, 0.0, 0.0, None
-        self.tangent = self.normal = self.curvature = None  # block-diagonal, reused
-        self.unshifted = None  # copy of the pre-matrix that TAO's MatShift does not reach
+        # tangent, normal, curvature: block-diagonal, reused; unshifted: copy of the
+        # pre-matrix that TAO's MatShift does not reach (all made by the first _assemble)
         self.assembled = self._assemble(None, gnorm=None)  # pattern only: TAO calls update
         self.shell = PETSc.Mat().createPython(self.assembled.getSizes(), comm=template.comm)
         self.shell.setPythonContext(self)
@@ -416,7 +431,11 @@ class GaussNewtonModel:
         else:
             G.PtAP(self.tangent, result=result)
         diagonal, dofs = result.getDiagonal(), self.tangent.getDiagonal()
-        self.mu = diagonal.sum() / max(dofs.sum(), 1.0)
+        try:
+            self.mu = diagonal.sum() / max(dofs.sum(), 1.0)
+        finally:
+            diagonal.destroy()
+            dofs.destroy()
         result.axpy(self.mu, self.normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if self.exact and problem.last_gradient is not None:
             self.curvature = _block_diagonal(
@@ -424,8 +443,6 @@ class GaussNewtonModel:
             )
             result.axpy(1.0, self.curvature,
                         structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        diagonal.destroy()
-        dofs.destroy()
         problem.write_x(self.xhat)
         if self.exact:
             # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
@@ -463,12 +480,22 @@ class GaussNewtonModel:
         self.shift_value += a
 
     def free(self):
-        """Destroy the PETSc objects (not named ``destroy``: MatPython calls that one)."""
-        for obj in (self.shell, self.assembled, self.unshifted, self.gauss_newton, self.sobolev,
-                    self.unscale, self.xhat, self.work, self.tangent, self.normal,
-                    self.curvature):
+        """Destroy the PETSc objects (not named ``destroy``: MatPython calls that one).
+
+        Collective. Needed: the shell holds the model as its Python context and the model
+        holds the shell, a cycle through PETSc that Python's garbage collector cannot see.
+        Safe to call twice, and on a model whose construction failed part way.
+        """
+        for name in self._OWNED:
+            obj = getattr(self, name, None)
             if obj is not None:
                 obj.destroy()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        self.free()
 
 
 def solve(
@@ -508,14 +535,56 @@ def solve(
         return _solve(problem, tao_type, options_prefix, monitor)
 
 
-def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
-    comm = problem.constraints.comm
+def _released(exc: BaseException) -> BaseException:
+    """``exc`` with the locals of this module's frames in its traceback cleared.
 
-    V = problem.q.function_space
-    x = dolfinx.fem.petsc.create_vector(V)
-    problem.retract()
-    problem.write_x(x)
-    g = x.duplicate()
+    Those are the callbacks TAO called (and what they called here): their arguments are
+    petsc4py's own references to the TAO and its vectors, which would keep them alive as
+    long as the caller keeps the exception, past their ``destroy()``. The frames stay in
+    the traceback (file, line, function); only their variables go. The caller's frames,
+    ``monitor``'s included, keep theirs.
+    """
+    tb = exc.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename == __file__:
+            try:
+                tb.tb_frame.clear()
+            except RuntimeError:  # a frame still running (none here: TAO has returned)
+                pass
+        tb = tb.tb_next
+    return exc
+
+
+def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
+    """TAO from ``problem.q``, with the options already in the database (see :func:`solve`).
+
+    Every PETSc object made here (x, g, the model, the TAO) is destroyed on the way out,
+    whether the solve returns or raises, in the same order on every rank (collective).
+    An exception raised by a callback (``monitor`` included) reaches PETSc as an error that
+    aborts ``TaoSolve``; petsc4py then raises a ``PETSc.Error`` (code 101) in its place, so
+    the callbacks keep the first one and it is that exception the caller sees.
+    """
+    comm = problem.constraints.comm
+    hessian = None
+    if tao_type in SECOND_ORDER_TYPES:
+        opts = PETSc.Options(options_prefix)
+        hessian = opts.getString("frames_hessian",
+                                 "exact" if problem.constraints.isotropic else "gauss_newton")
+        if hessian not in ("exact", "gauss_newton"):
+            raise ValueError(f"-frames_hessian must be 'exact' or 'gauss_newton', got {hessian!r}")
+
+    errors = []  # the first exception raised inside a callback, re-raised after TAO stops
+
+    def guarded(callback):
+        def call(*args):
+            try:
+                return callback(*args)
+            except BaseException as exc:
+                if not errors:
+                    errors.append(exc)
+                raise
+
+        return call
 
     def objective(tao, x):
         problem.set_from_x(x)
@@ -542,36 +611,43 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
         if monitor is not None:
             monitor(entry)
 
-    tao = PETSc.TAO().create(comm)
-    tao.setOptionsPrefix(options_prefix)
-    tao.setSolution(x)
-    tao.setObjectiveGradient(objective_gradient, g)
-    tao.setObjective(objective)  # line-search trials need no gradient
-    model = None
-    if tao_type in SECOND_ORDER_TYPES:
-        opts = PETSc.Options(options_prefix)
-        default = "exact" if problem.constraints.isotropic else "gauss_newton"
-        hessian = opts.getString("frames_hessian", default)
-        if hessian not in ("exact", "gauss_newton"):
-            raise ValueError(f"-frames_hessian must be 'exact' or 'gauss_newton', got {hessian!r}")
-        model = GaussNewtonModel(problem, x, damping=opts.getReal("frames_gn_damping", 1.0),
-                                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
-                                 exact=hessian == "exact")
-        tao.setHessian(model.update, model.shell, model.assembled)
-    tao.setUpdate(update)
-    tao.setMonitor(record)
-    tao.setFromOptions()
+    with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
+        x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
+        owned.callback(x.destroy)
+        problem.retract()
+        problem.write_x(x)
+        g = x.duplicate()
+        owned.callback(g.destroy)
+        model = None
+        if hessian is not None:
+            opts = PETSc.Options(options_prefix)
+            model = owned.enter_context(GaussNewtonModel(
+                problem, x, damping=opts.getReal("frames_gn_damping", 1.0),
+                damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
+                exact=hessian == "exact"))
+        tao = PETSc.TAO().create(comm)
+        owned.callback(tao.destroy)
+        tao.setOptionsPrefix(options_prefix)
+        tao.setSolution(x)
+        tao.setObjectiveGradient(guarded(objective_gradient), g)
+        tao.setObjective(guarded(objective))  # line-search trials need no gradient
+        if model is not None:
+            tao.setHessian(guarded(model.update), model.shell, model.assembled)
+        tao.setUpdate(guarded(update))
+        tao.setMonitor(guarded(record))
+        tao.setFromOptions()
 
-    start = time.perf_counter()
-    tao.solve()
-    wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
-    problem.set_from_x(tao.getSolution())
-    reason = converged_reason_name(tao.getConvergedReason())
+        start = time.perf_counter()
+        try:
+            tao.solve()
+        except PETSc.Error:
+            if not errors:
+                raise
+        if errors:  # outside the except clause: no PETSc.Error chained to it
+            raise _released(errors.pop())
+        wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+        problem.set_from_x(tao.getSolution())
+        reason = converged_reason_name(tao.getConvergedReason())
     iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
-    tao.destroy()
-    if model is not None:
-        model.free()
-    x.destroy()
-    g.destroy()
     return SolveResult(history=history, converged_reason=reason, iterations=iterations,
                        wall_time_s=wall)
