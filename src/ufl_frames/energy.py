@@ -35,7 +35,7 @@ def frame_space(mesh) -> fem.FunctionSpace:
             f"frame fields need a planar 2D mesh, got topological dimension "
             f"{mesh.topology.dim} in {mesh.geometry.dim}D"
         )
-    return fem.functionspace(mesh, ("Lagrange", 1, (5,)))
+    return fem.functionspace(mesh, ("Lagrange", 1, (odeco.NUM_COEFFICIENTS,)))
 
 
 def interpolate_frames(V, f, name: str = "q") -> fem.Function:

@@ -157,7 +157,7 @@ def field_functions(q: fem.Function) -> list[fem.Function]:
     """
     mesh = q.function_space.mesh
     V2 = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
-    lengths, u, v = _frames(q.x.array.reshape(-1, 5))
+    lengths, u, v = _frames(q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS))
     # P1 spaces on one mesh share the vertex numbering: the rows of q are those of V2.
     out = []
     for name, values in (("lengths", lengths), ("u", u), ("v", v)):
@@ -352,7 +352,7 @@ def _evaluate_owned(q: fem.Function, points: np.ndarray):
     if found.size == 0:
         return found, np.zeros((0, 5))
     values = q.eval(points[found], np.asarray(cells, dtype=np.int32))
-    return found, np.asarray(values).reshape(-1, 5)
+    return found, np.asarray(values).reshape(-1, odeco.NUM_COEFFICIENTS)
 
 
 def glyph_samples(
@@ -386,7 +386,7 @@ def glyph_samples(
     if h >= 0.8 * spacing:
         owned = V.dofmap.index_map.size_local
         points = _gather_rows(comm, V.tabulate_dof_coordinates()[:owned, :2])
-        rows = _gather_rows(comm, q.x.array.reshape(-1, 5)[:owned])
+        rows = _gather_rows(comm, q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)[:owned])
         return points, rows, h
     grid = grid_points(lo, hi, spacing)
     found, values = _evaluate_owned(q, grid)
@@ -403,7 +403,7 @@ def _is_isotropic(q: fem.Function) -> bool:
     """Whether l1 = l2 (relative 1e-6) at every vertex, on all ranks (collective)."""
     comm = q.function_space.mesh.comm
     owned = q.function_space.dofmap.index_map.size_local
-    lengths, _, _ = _frames(q.x.array.reshape(-1, 5)[:owned])
+    lengths, _, _ = _frames(q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)[:owned])
     scale = comm.allreduce(float(np.abs(lengths).max(initial=0.0)), op=MPI.MAX)
     spread = comm.allreduce(
         float(np.abs(lengths[:, 0] - lengths[:, 1]).max(initial=0.0)), op=MPI.MAX

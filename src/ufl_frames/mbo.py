@@ -77,7 +77,7 @@ def mbo_frame_field(
 
     q = fem.Function(V, name="q")
     q_bc = fem.Function(V)
-    rows_bc = q_bc.x.array.reshape(-1, 5)
+    rows_bc = q_bc.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
     rows_bc[b] = odeco.frames_to_q(np.ones((b.size, 2)), np.arctan2(*constraints.normals.T[::-1]))
     bc = fem.dirichletbc(q_bc, b)
     q.x.array[:] = q_bc.x.array
@@ -103,7 +103,7 @@ def mbo_frame_field(
         with petsc_defaults(options_prefix, defaults):
             ksp.setFromOptions()
 
-        rows = q.x.array.reshape(-1, 5)
+        rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
         interior = constraints.interior
         for level, tau_value in enumerate(diffusion_schedule(mesh, levels)):
             tau.value = tau_value
@@ -127,7 +127,8 @@ def mbo_frame_field(
                     )
                 q.x.scatter_forward()
                 rows[interior] = _unit_isotropic(rows[interior])
-                local = float(np.abs(rows - q_prev.x.array.reshape(-1, 5)).max(initial=0.0))
+                previous = q_prev.x.array.reshape(rows.shape)
+                local = float(np.abs(rows - previous).max(initial=0.0))
                 change = mesh.comm.allreduce(local, op=MPI.MAX)
             if monitor is not None:
                 monitor(level, tau_value, change)

@@ -42,8 +42,12 @@ import numpy as np
 
 SQRT2 = np.sqrt(2.0)
 
+#: Coefficients per frame: the 5 circular harmonics of a 2D fourth-order tensor (3D frames,
+#: spherical harmonics, will have 15). Every (N, 5) array and 5-block of the package is this.
+NUM_COEFFICIENTS = 5
+
 #: Symmetric matrices A_m of the variety equations g_m(q) = q^T A_m q (note eq. 3).
-VARIETY_MATRICES = np.zeros((3, 5, 5))
+VARIETY_MATRICES = np.zeros((3, NUM_COEFFICIENTS, NUM_COEFFICIENTS))
 VARIETY_MATRICES[0, 0, 0] = 1.0
 VARIETY_MATRICES[0, 3, 3] = VARIETY_MATRICES[0, 4, 4] = -18.0
 # g2 = q0 q1 - 3√2 (q1 q3 + q2 q4)

@@ -120,7 +120,7 @@ def frame_constraints(
     return FrameConstraints(
         boundary=boundary,
         normals=normals,
-        weights=lumped.array.reshape(-1, 5)[:, 0].copy(),
+        weights=lumped.array.reshape(-1, odeco.NUM_COEFFICIENTS)[:, 0].copy(),
         owned=index_map.size_local,
         isotropic=isotropic,
         comm=mesh.comm,

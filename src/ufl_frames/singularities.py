@@ -19,6 +19,8 @@ when called.
 
 import numpy as np
 
+from ufl_frames.odeco import NUM_COEFFICIENTS
+
 __all__ = [
     "find_singularities",
     "index_theorem",
@@ -40,8 +42,8 @@ def _check(cells, q, coords=None):
     if cells.size and not np.issubdtype(cells.dtype, np.integer):
         raise ValueError(f"cells must hold integer vertex indices, got dtype {cells.dtype}")
     q = np.asarray(q, dtype=np.float64)
-    if q.ndim != 2 or q.shape[1] != 5:
-        raise ValueError(f"q must have shape (N, 5), got {q.shape}")
+    if q.ndim != 2 or q.shape[1] != NUM_COEFFICIENTS:
+        raise ValueError(f"q must have shape (N, {NUM_COEFFICIENTS}), got {q.shape}")
     if cells.size and (cells.min() < 0 or cells.max() >= q.shape[0]):
         raise ValueError(f"cells index vertices outside 0..{q.shape[0] - 1}")
     if not np.all(np.isfinite(q[:, 3:5])):
@@ -105,7 +107,7 @@ def locate_singularities(q_function) -> list[dict]:
     tdim = mesh.topology.dim
     bs = V.dofmap.index_map_bs
     cell_dofs = V.dofmap.list
-    if tdim != 2 or bs != 5 or cell_dofs.shape[1] != 3:
+    if tdim != 2 or bs != NUM_COEFFICIENTS or cell_dofs.shape[1] != 3:
         raise ValueError(
             "locate_singularities needs a P1 function with value shape (5,) on a triangle "
             f"mesh; got tdim={tdim}, block size={bs}, {cell_dofs.shape[1]} dofs per cell"

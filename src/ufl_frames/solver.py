@@ -114,7 +114,7 @@ class FrameProblem:
     @property
     def rows(self) -> np.ndarray:
         """Local rows (owned and ghost) of q, a (N, 5) view."""
-        return self.q.x.array.reshape(-1, 5)
+        return self.q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
 
     @property
     def owned(self) -> int:
@@ -143,7 +143,8 @@ class FrameProblem:
     def set_from_x(self, x: PETSc.Vec) -> None:
         """q ← R(x / √m): unscale, fill ghosts, project pointwise, normalise (steps 4–5)."""
         n = self.owned
-        self.rows[:n] = x.getArray(readonly=True).reshape(-1, 5) / self.sqrt_mass[:n, None]
+        x_rows = x.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS)
+        self.rows[:n] = x_rows / self.sqrt_mass[:n, None]
         self.q.x.scatter_forward()
         self.retract()
 
@@ -203,9 +204,10 @@ class FrameProblem:
         b = fem.assemble_vector(self.gradient)
         b.scatter_reverse(dolfinx.la.InsertMode.add)
         comm = self.constraints.comm
-        H = comm.allreduce(float(np.dot(b.array[: 5 * n], self.q.x.array[: 5 * n])), op=MPI.SUM)
+        owned = odeco.NUM_COEFFICIENTS * n
+        H = comm.allreduce(float(np.dot(b.array[:owned], self.q.x.array[:owned])), op=MPI.SUM)
         # Ghost rows of b are partial sums: projected along (pointwise), then dropped.
-        dh = b.array.reshape(-1, 5) / self.sqrt_mass[:, None]
+        dh = b.array.reshape(-1, odeco.NUM_COEFFICIENTS) / self.sqrt_mass[:, None]
         self.last_gradient, self.last_energy = dh, H / 4
         dh = projection.tangent_project_rows(self.rows, dh, self.constraints)[:n]
         x = self.rows[:n] * self.sqrt_mass[:n, None]
@@ -217,20 +219,21 @@ class FrameProblem:
 
 
 def _block_diagonal(blocks: np.ndarray, index_map, comm, result=None) -> PETSc.Mat:
-    """PETSc AIJ matrix (block size 5) with the (n, 5, 5) ``blocks`` on the owned diagonal.
+    """PETSc AIJ matrix (block size k) with the (n, k, k) ``blocks`` on the owned diagonal.
 
     With ``result`` (made by an earlier call) its values are replaced in place: PtAP
     with reuse in parallel needs the same P object every time.
     """
     n = blocks.shape[0]
     first = index_map.local_range[0]
-    size = (5 * n, 5 * index_map.size_global)
-    cols = 5 * (first + np.arange(n))[:, None, None] + np.arange(5)[None, None, :]
-    indices = np.broadcast_to(cols, (n, 5, 5)).astype(PETSc.IntType).ravel()
-    indptr = np.arange(0, 25 * n + 1, 5, dtype=PETSc.IntType)
+    k = blocks.shape[1]  # odeco.NUM_COEFFICIENTS
+    size = (k * n, k * index_map.size_global)
+    cols = k * (first + np.arange(n))[:, None, None] + np.arange(k)[None, None, :]
+    indices = np.broadcast_to(cols, (n, k, k)).astype(PETSc.IntType).ravel()
+    indptr = np.arange(0, k * k * n + 1, k, dtype=PETSc.IntType)
     if result is None:
         return PETSc.Mat().createAIJ(
-            size=(size, size), bsize=5, csr=(indptr, indices, blocks.ravel()), comm=comm
+            size=(size, size), bsize=k, csr=(indptr, indices, blocks.ravel()), comm=comm
         )
     result.setValuesCSR(indptr, indices, blocks.ravel())
     result.assemble()
@@ -258,7 +261,8 @@ def frame_problem(
         V, isotropic=isotropic, max_aspect=max_aspect, boundary_angles=boundary_angles
     )
     if pin_singularities:
-        constraints = projection.pin_singularities(V, constraints, q.x.array.reshape(-1, 5))
+        rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
+        constraints = projection.pin_singularities(V, constraints, rows)
     H = energy.integrability_energy_form(q)
     problem = FrameProblem(
         q=q,
@@ -425,7 +429,8 @@ class GaussNewtonModel:
         blocks = np.einsum("nik,njk->nij", basis[:n], basis[:n])
         index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
         self.tangent = _block_diagonal(blocks, index_map, comm, self.tangent)
-        self.normal = _block_diagonal(np.eye(5) - blocks, index_map, comm, self.normal)
+        identity = np.eye(odeco.NUM_COEFFICIENTS)
+        self.normal = _block_diagonal(identity - blocks, index_map, comm, self.normal)
         if result is None:
             result = G.PtAP(self.tangent)
         else:
