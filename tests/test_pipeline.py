@@ -43,3 +43,21 @@ def test_frame_field_on_the_piano(tmp_path):
     assert names[0] == "frames.bp" and {"frames.png", "convergence.png"} <= set(names)
     data = io.read_vtk(out / "frames.pvd")
     assert data["points"].shape[0] >= domain.num_vertices  # shared points repeat per piece
+
+
+def test_solver_reuses_the_mbo_constraints():
+    """frame_problem(constraints=...) equals the constraints found afresh for the solver."""
+    import numpy as np
+
+    from ufl_frames import projection, solver
+
+    field = FrameField.initial(geometry.annulus(COMM, 0.2), isotropic=False, max_aspect=3.0)
+    q0 = field.q.x.array.copy()
+    reused = solver.frame_problem(field.q, max_aspect=3.0, constraints=field.constraints,
+                                  pin_singularities=False).constraints
+    field.q.x.array[:] = q0
+    fresh = projection.frame_constraints(field.q.function_space, max_aspect=3.0,
+                                         boundary_angles=field.boundary_angles)
+    assert reused.max_aspect == fresh.max_aspect == 3.0 and not reused.isotropic
+    for name in ("boundary", "normals", "weights"):
+        assert np.array_equal(getattr(reused, name), getattr(fresh, name)), name

@@ -45,6 +45,7 @@ class FrameField:
 
     ``q`` is the P1 field (5 coefficients per vertex); ``boundary_angles`` the exact
     boundary cross angles of the CAD model per local row (None without one);
+    ``constraints`` the boundary rows, normals and lumped masses, found once;
     ``problem`` and ``result`` are set by :meth:`solve`; ``singularities`` are those of
     the current ``q`` (``{"index", "x", "y"}``, the same list on every rank).
     """
@@ -54,6 +55,7 @@ class FrameField:
     isotropic: bool = False
     max_aspect: float | None = None
     boundary_angles: np.ndarray | None = field(default=None, repr=False)
+    constraints: projection.FrameConstraints | None = field(default=None, repr=False)
     problem: solver.FrameProblem | None = field(default=None, repr=False)
     result: solver.SolveResult | None = None
     singularities: list[dict] = field(default_factory=list)
@@ -76,7 +78,7 @@ class FrameField:
         q = mbo.mbo_frame_field(V, constraints=constraints, monitor=monitor)
         return cls(domain=domain, q=q, isotropic=isotropic,
                    max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
-                   singularities=singularities.locate_singularities(q))
+                   constraints=constraints, singularities=singularities.locate_singularities(q))
 
     def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
               options_prefix: str = "") -> solver.SolveResult:
@@ -85,6 +87,7 @@ class FrameField:
         self.problem = solver.frame_problem(
             self.q, isotropic=self.isotropic, pin_singularities=pin_singularities,
             max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
+            constraints=self.constraints,  # the MBO field's: boundary, normals, masses once
         )
         self.result = solver.solve(self.problem, max_it=max_it, monitor=monitor,
                                    options_prefix=options_prefix)

@@ -41,7 +41,7 @@ gave no value, and ``setFromOptions`` comes last.
 
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
@@ -246,6 +246,7 @@ def frame_problem(
     pin_singularities: bool = True,
     max_aspect: float | None = None,
     boundary_angles: np.ndarray | None = None,
+    constraints: projection.FrameConstraints | None = None,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
@@ -254,12 +255,18 @@ def frame_problem(
     singular triangles of ``q`` (see :func:`projection.pin_singularities`). ``max_aspect``
     bounds l_max/l_min of non-isotropic frames (see :func:`odeco.clamp_aspect`).
     ``boundary_angles``: exact boundary cross angles per local row (see
-    :func:`projection.frame_constraints`).
+    :func:`projection.frame_constraints`). ``constraints`` already found for ``q``'s
+    space (e.g. the MBO field's) are reused, with ``isotropic`` and ``max_aspect`` set
+    from here; ``boundary_angles`` is then not needed.
     """
     V = q.function_space
-    constraints = projection.frame_constraints(
-        V, isotropic=isotropic, max_aspect=max_aspect, boundary_angles=boundary_angles
-    )
+    if constraints is None:
+        constraints = projection.frame_constraints(
+            V, isotropic=isotropic, max_aspect=max_aspect, boundary_angles=boundary_angles
+        )
+    else:
+        constraints = replace(constraints, isotropic=isotropic,
+                              max_aspect=None if isotropic else max_aspect)
     if pin_singularities:
         rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
         constraints = projection.pin_singularities(V, constraints, rows)
