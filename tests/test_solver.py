@@ -392,3 +392,24 @@ def test_nearly_integrable_field_is_not_stopped_early(tmp_path, tao_type, max_it
         # bncg numbers its first step 0 again (SolveResult): one more than max_it.
         assert result.converged_reason == "DIVERGED_MAXITS" and result.iterations >= max_it
         assert result.H_final < H0
+
+
+def test_one_retraction_per_vector_state(annulus_mesh, monkeypatch):
+    """During a solve, TAO's callbacks at the same iterate retract once (tracking), and the
+    result is the one without the shortcut."""
+    calls = []
+    retract = solver.FrameProblem.retract
+    monkeypatch.setattr(solver.FrameProblem, "retract",
+                        lambda self: (calls.append(1), retract(self))[1])
+    problem = mbo_problem(annulus_mesh, 0.2, isotropic=True)
+    q0 = problem.q.x.array.copy()
+    tracked = solver.solve(problem, max_it=6)
+    with_tracking = len(calls)
+    # Without it: every set_from_x retracts (tracking() entered, then switched off).
+    calls.clear()
+    problem.q.x.array[:] = q0
+    monkeypatch.setattr(solver.FrameProblem, "_mark_synced", lambda self, x: None)
+    plain = solver.solve(problem, max_it=6)
+    assert with_tracking < 0.7 * len(calls)
+    assert tracked.iterations == plain.iterations
+    assert tracked.H_final == pytest.approx(plain.H_final, rel=1e-10)

@@ -40,7 +40,7 @@ gave no value, and ``setFromOptions`` comes last.
 """
 
 import time
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
@@ -110,6 +110,10 @@ class FrameProblem:
     last_gradient: np.ndarray | None = field(default=None, repr=False)
     #: H at the point of ``last_gradient``.
     last_energy: float | None = None
+    #: During a solve (see :meth:`tracking`): the (vector, PETSc state) that q is R of.
+    #: TAO's callbacks at one iterate (gradient, update, monitor, Hessian) then retract once.
+    _synced: tuple | None = field(default=None, repr=False)
+    _tracking: bool = field(default=False, repr=False)
 
     @property
     def rows(self) -> np.ndarray:
@@ -140,13 +144,32 @@ class FrameProblem:
         """
         return self.energy_scale / np.sqrt(self.norm2)
 
+    @contextmanager
+    def tracking(self):
+        """Within it, :meth:`set_from_x` skips the retraction when x is the vector, in the
+        same PETSc state, that q was last set from or written to (TAO changes x only
+        through PETSc, which counts every change). Only for code that changes q through
+        :meth:`set_from_x` alone, such as the TAO callbacks of :func:`solve`."""
+        self._tracking, self._synced = True, None
+        try:
+            yield self
+        finally:
+            self._tracking, self._synced = False, None
+
+    def _mark_synced(self, x: PETSc.Vec) -> None:
+        if self._tracking:
+            self._synced = (x.handle, x.stateGet())
+
     def set_from_x(self, x: PETSc.Vec) -> None:
         """q ← R(x / √m): unscale, fill ghosts, project pointwise, normalise (steps 4–5)."""
+        if self._tracking and self._synced == (x.handle, x.stateGet()):
+            return  # q is R(x) already
         n = self.owned
         x_rows = x.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS)
         self.rows[:n] = x_rows / self.sqrt_mass[:n, None]
         self.q.x.scatter_forward()
         self.retract()
+        self._mark_synced(x)
 
     def retract(self) -> None:
         """Steps 4–5 of note §3 on q in place."""
@@ -157,6 +180,7 @@ class FrameProblem:
         """x ← √m q (owned rows)."""
         n = self.owned
         x.getArray()[:] = (self.rows[:n] * self.sqrt_mass[:n, None]).ravel()
+        self._mark_synced(x)
 
     def tangent_basis(self) -> np.ndarray:
         """Tangent basis of the constraints at q (local rows), active set from the last gradient."""
@@ -624,6 +648,7 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
             monitor(entry)
 
     with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
+        owned.enter_context(problem.tracking())
         x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
         owned.callback(x.destroy)
         problem.retract()
