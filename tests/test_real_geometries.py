@@ -246,9 +246,9 @@ def test_second_order_msh_keeps_every_node(tmp_path):
 # --- sizes --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("unit", [1e-3, 1.0, 1e3])
+@pytest.mark.parametrize("unit", [1e-6, 1e-3, 1.0, 1e3])
 def test_default_size_is_relative_to_the_shape(tmp_path, unit):
-    """A plate with a hole gives about the same mesh in millimetres, metres, kilometres."""
+    """A plate with a hole drawn in mm gives about the same mesh read as µm, mm, m or km."""
     w, h, r = 65 * unit, 120 * unit, 10 * unit
     text = (f'SetFactory("OpenCASCADE");\nRectangle(1) = {{0, 0, 0, {w}, {h}}};\n'
             f"Disk(2) = {{{w / 2}, {h / 2}, 0, {r}}};\n"
