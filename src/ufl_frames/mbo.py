@@ -37,8 +37,9 @@ from petsc4py import PETSc  # noqa: E402
 from ufl_frames import odeco, projection  # noqa: E402
 
 
-def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
-    """Diffusion times τ: √τ from diameter/4 halving down to the mean edge length h."""
+def length_scales(mesh) -> tuple[float, float]:
+    """(diameter of the bounding box, h): h the edge of an equilateral triangle of the
+    mean cell area (collective)."""
     comm = mesh.comm
     x = mesh.geometry.x[:, :2]
     lo = [comm.allreduce(float(v), op=MPI.MIN) for v in x.min(axis=0, initial=np.inf)]
@@ -46,7 +47,12 @@ def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
     diameter = float(np.linalg.norm(np.subtract(hi, lo)))
     area = comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh))), op=MPI.SUM)
     cells = mesh.topology.index_map(2).size_global
-    h = math.sqrt(4 * area / (math.sqrt(3) * cells))  # edge of an equilateral triangle
+    return diameter, math.sqrt(4 * area / (math.sqrt(3) * cells))
+
+
+def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
+    """Diffusion times τ: √τ from diameter/4 halving down to the mean edge length h."""
+    diameter, h = length_scales(mesh)
     if levels is None:
         levels = max(1, math.ceil(math.log2(diameter / 4 / h)) + 1)
     return [(diameter / 4 / 2**k) ** 2 for k in range(levels)]
@@ -84,9 +90,13 @@ def mbo_frame_field(
 
     tau = fem.Constant(mesh, PETSc.ScalarType(1.0))
     u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    a = fem.form(ufl.inner(u, w) * ufl.dx + tau * ufl.inner(ufl.grad(u), ufl.grad(w)) * ufl.dx)
+    # Both sides divided by h²: entries O(1) whatever the domain's size, like the unit
+    # diagonal DOLFINx puts on the boundary rows (unscaled, a domain 6.5e7 wide had
+    # entries ~1e12 against those 1s, and CG + GAMG failed: KSP reason -8).
+    unit = fem.Constant(mesh, PETSc.ScalarType(1.0 / length_scales(mesh)[1] ** 2))
+    a = fem.form(unit * (ufl.inner(u, w) + tau * ufl.inner(ufl.grad(u), ufl.grad(w))) * ufl.dx)
     q_prev = fem.Function(V)
-    L = fem.form(ufl.inner(q_prev, w) * ufl.dx)
+    L = fem.form(unit * ufl.inner(q_prev, w) * ufl.dx)
 
     # A, rhs and the KSP are destroyed however the loop ends (a failed solve, a monitor that
     # raises), in reverse order of creation on every rank: the destroys are collective.
@@ -99,7 +109,7 @@ def mbo_frame_field(
         owned.callback(ksp.destroy)
         ksp.setOptionsPrefix(options_prefix)
         ksp.setOperators(A)
-        defaults = {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-10}
+        defaults = {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-12}
         with petsc_defaults(options_prefix, defaults):
             ksp.setFromOptions()
 

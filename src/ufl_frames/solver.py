@@ -423,10 +423,15 @@ class GaussNewtonModel:
             self.form = fem.form(energy.gauss_newton_form(problem.q))
         self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
-        self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], 5)
+        self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], odeco.NUM_COEFFICIENTS)
         V = problem.q.function_space
         u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-        sobolev = fem.form((ufl.inner(ufl.grad(u), ufl.grad(w)) + ufl.inner(u, w)) * ufl.dx)
+        # K + M/A (A the area): the H¹ metric in units of the domain, so that the damping,
+        # like JᵀJ, does not depend on the domain's size (K + M, on a domain 6.5e7 wide,
+        # was M alone: an L² damping, and Newton stalled at 500 iterations).
+        area = fem.Constant(V.mesh, PETSc.ScalarType(problem.area))
+        sobolev = fem.form((ufl.inner(ufl.grad(u), ufl.grad(w)) + ufl.inner(u, w) / area)
+                           * ufl.dx)
         self.sobolev = dolfinx.fem.petsc.assemble_matrix(sobolev)
         self.sobolev.assemble()
         self.sobolev.diagonalScale(self.unscale, self.unscale)
