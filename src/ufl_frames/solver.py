@@ -423,7 +423,8 @@ class GaussNewtonModel:
             self.form = fem.form(energy.gauss_newton_form(problem.q))
         self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
-        self.unscale.getArray()[:] = np.repeat(1.0 / problem.sqrt_mass[: problem.owned], odeco.NUM_COEFFICIENTS)
+        inverse = 1.0 / problem.sqrt_mass[: problem.owned]
+        self.unscale.getArray()[:] = np.repeat(inverse, odeco.NUM_COEFFICIENTS)
         V = problem.q.function_space
         u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
         # K + M/A (A the area): the H¹ metric in units of the domain, so that the damping,
