@@ -349,7 +349,7 @@ class GaussNewtonModel:
 
     In the scaled unknowns x = W q (W = diag √m) at the current iterate:
 
-        B = S [ P W⁻¹ (JᵀJ + λ (K + M)) W⁻¹ P + μ (I − P) ] S + μ x̂ x̂ᵀ
+        B = S [ P W⁻¹ (JᵀJ + λ (K + M/A)) W⁻¹ P + μ (I − P) ] S + μ x̂ x̂ᵀ
 
     * JᵀJ: the linearised bracket, assembled from :func:`energy.gauss_newton_form`;
     * P: block-diagonal tangent projector of the Odeco constraints (per vertex);
@@ -358,7 +358,8 @@ class GaussNewtonModel:
     * S = I − x̂x̂ᵀ: tangent projector of the normalisation sphere |x| = const
       (without it the model predicts decreases by shrinking the frames, which the
       retraction undoes);
-    * λ (K + M): Levenberg–Marquardt damping in the H¹ metric. H has a large family
+    * λ (K + M/A): Levenberg–Marquardt damping in the H¹ metric (A the area: in units of
+      the domain, so the damping does not depend on its size). H has a large family
       of minimisers (integrable fields are far from unique), so JᵀJ is singular;
       an L² (identity) damping lets the steps excite rough null directions, an H¹
       damping keeps them smooth. λ = λ₀ max(r, min(1, |g|/max(|g₀|, G))) · mean|q|²
