@@ -697,12 +697,13 @@ class _Arrays:
     boundary: np.ndarray  # (k, 2) boundary edges, domain on their left
     boundary_curve: np.ndarray  # (k,) curve tag of each
     gmsh_node: np.ndarray  # (n,) Gmsh node tag of each row
+    edges: np.ndarray  # (e, 2) every edge once, (lo, hi)
 
 
 def _mesh_arrays(source: str, notes: list[str]) -> _Arrays:
     """The current Gmsh mesh as checked arrays: used nodes only, planar, valid cells."""
     gmsh.model.mesh.removeDuplicateNodes()  # touching surfaces of a .msh
-    xyz, cells, edges, curves, tags = _triangles_of_model(notes)
+    xyz, cells, curve_edges, curves, tags = _triangles_of_model(notes)
     if cells.size == 0:
         raise GeometryError(f"{source!r} produced no triangle cells")
     used, cells = np.unique(cells, return_inverse=True)
@@ -734,6 +735,7 @@ def _mesh_arrays(source: str, notes: list[str]) -> _Arrays:
     directed = np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]], cells[:, [2, 0]]])
     keys = _edge_keys(directed, n)
     unique, first, counts = np.unique(keys, return_index=True, return_counts=True)
+    mesh_edges = np.stack([unique // n, unique % n], axis=1)
     if np.any(counts > 2):
         raise GeometryError(
             f"{source!r}: {int((counts > 2).sum())} edges are shared by more than two "
@@ -744,8 +746,8 @@ def _mesh_arrays(source: str, notes: list[str]) -> _Arrays:
     new_row = np.full(int(tags.size), -1, dtype=np.int64)
     new_row[used] = np.arange(used.size)
     boundary_curve = np.full(boundary.shape[0], NO_CURVE, dtype=np.int64)
-    if edges.size:
-        mapped = new_row[edges]
+    if curve_edges.size:
+        mapped = new_row[curve_edges]
         ok = np.all(mapped >= 0, axis=1)
         curve_keys = _edge_keys(mapped[ok], n)
         order = np.argsort(curve_keys)
@@ -754,7 +756,7 @@ def _mesh_arrays(source: str, notes: list[str]) -> _Arrays:
         boundary_curve = np.where(np.isnan(found), NO_CURVE, found).astype(np.int64)
     _check_conforming(source, x, cells, boundary)
     return _Arrays(x=x, cells=cells, boundary=boundary, boundary_curve=boundary_curve,
-                   gmsh_node=tags[used])
+                   gmsh_node=tags[used], edges=mesh_edges)
 
 
 def _check_conforming(source: str, x, cells, boundary) -> None:
@@ -806,14 +808,13 @@ def _cad_directions(arrays: _Arrays, mesh_angle: np.ndarray):
     e^{4iψ} and the interior angle is the angle between the curves' outgoing tangents
     (on the side the mesh says, for reflex corners)."""
     boundary_nodes = np.unique(arrays.boundary)
-    row_of_tag = {int(t): i for i, t in enumerate(arrays.gmsh_node[boundary_nodes])}
+    row_of_tag = {int(arrays.gmsh_node[row]): int(row) for row in boundary_nodes}
     psi = np.full(arrays.x.shape[0], np.nan)
     curves = sorted({int(c) for c in arrays.boundary_curve if c != NO_CURVE})
     for curve in curves:
         tags, _, param = gmsh.model.mesh.getNodes(1, curve, includeBoundary=False,
                                                   returnParametricCoord=True)
-        rows = [boundary_nodes[row_of_tag[int(t)]] if int(t) in row_of_tag else -1 for t in tags]
-        rows = np.asarray(rows, dtype=np.int64)
+        rows = np.array([row_of_tag.get(int(t), -1) for t in tags], dtype=np.int64)
         if not tags.size or param.size != tags.size:
             continue
         d = np.asarray(gmsh.model.getDerivative(1, curve, param)).reshape(-1, 3)
@@ -825,7 +826,7 @@ def _cad_directions(arrays: _Arrays, mesh_angle: np.ndarray):
         tags = gmsh.model.mesh.getNodes(0, point)[0]
         if tags.size != 1 or int(tags[0]) not in row_of_tag:
             continue
-        node = boundary_nodes[row_of_tag[int(tags[0])]]
+        node = row_of_tag[int(tags[0])]
         xyz = gmsh.model.getValue(0, point, [])
         outgoing = []
         for curve in gmsh.model.getAdjacencies(0, point)[0]:
@@ -864,22 +865,14 @@ def _mesh_corners(arrays: _Arrays, mesh_angle: np.ndarray) -> list[Corner]:
     ]
 
 
-def _unique_edges(cells: np.ndarray, n: int) -> np.ndarray:
-    """The edges of the triangles, each once, as (lo, hi) node pairs."""
-    keys = np.unique(_edge_keys(np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]],
-                                                 cells[:, [2, 0]]]), n))
-    return np.stack([keys // n, keys % n], axis=1)
-
-
 def _euler_characteristic(arrays: _Arrays) -> int:
     """χ = V − E + F of the triangulation (1 for a disc, 1 − holes in general)."""
-    n = arrays.x.shape[0]
-    return int(n - _unique_edges(arrays.cells, n).shape[0] + arrays.cells.shape[0])
+    return int(arrays.x.shape[0] - arrays.edges.shape[0] + arrays.cells.shape[0])
 
 
 def _mean_edge_length(arrays: _Arrays) -> float:
-    edges = _unique_edges(arrays.cells, arrays.x.shape[0])
-    return float(np.linalg.norm(arrays.x[edges[:, 1]] - arrays.x[edges[:, 0]], axis=1).mean())
+    e = arrays.edges
+    return float(np.linalg.norm(arrays.x[e[:, 1]] - arrays.x[e[:, 0]], axis=1).mean())
 
 
 # --- Gmsh session handling and distribution ---------------------------------------------
