@@ -14,7 +14,7 @@ uses them: singular triangles pinned, non-isotropic frames bounded by l_max/l_mi
 * ``bncg``: the note's projected gradient descent (``-tao_bncg_type gd``, Armijo), the
   reference, with ``--max-it-gd`` iterations (default 2000);
 * ``nls``, ``ntr``, ``bntr``: Newton line search / trust regions on the Riemannian
-  Gauss–Newton model (``solver.GaussNewtonModel``), ``lmvm``: L-BFGS; ``--max-it``
+  Gauss–Newton model (``solvers.GaussNewtonModel``), ``lmvm``: L-BFGS; ``--max-it``
   iterations (default 500).
 
 Each method runs under its own options prefix (``nls_``, ``bncg_``, ...), so PETSc options
@@ -127,7 +127,10 @@ init_petsc(sys.argv[:1] + PETSC_ARGV)
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, geometry, mbo, singularities, solver  # noqa: E402
+from ufl_frames import geometry, solvers  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.frames2d import singularities  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
 
 def log(comm, *args):
@@ -159,7 +162,7 @@ def run_method(problem, method, max_it):
 
     problem.energy, problem.riemannian_gradient = counted_energy, counted_gradient
     comm.Barrier()
-    result = solver.solve(
+    result = solvers.solve(
         problem,
         max_it=max_it,
         options_prefix=f"{method}_",
@@ -221,7 +224,7 @@ def run_case(comm, name, h, args):
     runs = []
     for method in args.methods:
         args.state.q.x.array[:] = args.state.q0
-        problem = solver.frame_problem(
+        problem = solvers.frame_problem(
             args.state.q,
             isotropic=isotropic,
             pin_singularities=args.pin,

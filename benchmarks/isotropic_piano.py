@@ -25,7 +25,10 @@ init_petsc([sys.argv[0], *petsc_args])
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, geometry, mbo, singularities, solver  # noqa: E402
+from ufl_frames import geometry, solvers  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.frames2d import singularities  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
 
 def describe(found):
@@ -41,8 +44,8 @@ for h in args.sizes:
     initial = mbo.mbo_frame_field(V)
     for pinned in (True, False):
         q = initial.copy()
-        problem = solver.frame_problem(q, isotropic=True, pin_singularities=pinned)
-        result = solver.solve(problem, max_it=args.max_it)
+        problem = solvers.frame_problem(q, isotropic=True, pin_singularities=pinned)
+        result = solvers.solve(problem, max_it=args.max_it)
         rel = result.history[-1]["gnorm"] / result.history[0]["gnorm"]
         found = singularities.locate_singularities(q)
         say(f"{h:6.3f} {str(pinned):>7} {result.iterations:5d} {result.H_final:10.4g} {rel:9.1e} "

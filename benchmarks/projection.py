@@ -2,7 +2,7 @@
 
     python benchmarks/projection.py [--n 1000000] [--repeat 3] [--seed 0]
 
-Times :func:`ufl_frames.odeco.project` on N random vertices, best of ``--repeat`` runs:
+Times :func:`ufl_frames.frames2d.odeco.project` on N random vertices, best of ``--repeat`` runs:
 
 * ``gaussian``: q with independent N(0, 1) entries, far from the variety (about 10 % of
   the rows take the slow, multi-start path of the closest-point search);
@@ -10,7 +10,7 @@ Times :func:`ufl_frames.odeco.project` on N random vertices, best of ``--repeat`
   relative, the situation in the solver; ``isotropic frames``: the same with l1 = l2;
 * ``isotropic=True`` (projection onto isotropic frames), ``method="mandel"`` (the note's
   eigentensor projection, for comparison), the closest-point projection without the
-  row blocking (``_CHUNK_ROWS`` = N), and :func:`ufl_frames.odeco.tangent_project`.
+  row blocking (``_CHUNK_ROWS`` = N), and :func:`ufl_frames.frames2d.odeco.tangent_project`.
 
 Target (issue 2): at least 2 million vertices per second for ``project`` on one core.
 The closest-point code is element-wise NumPy (one thread); for the LAPACK-based
@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from ufl_frames import odeco
+from ufl_frames.frames2d import odeco
 
 TARGET = 2.0  # million vertices per second
 

@@ -99,7 +99,9 @@ import dolfinx.fem.petsc  # noqa: E402, F401
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, geometry, mbo, solver  # noqa: E402
+from ufl_frames import geometry, solvers  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
 #: Triangles of the Gmsh annulus at mesh size 0.05 (triangles ~ 1/h²).
 TRIANGLES_AT_005 = 2305
@@ -137,7 +139,7 @@ def bench_size(comm, h, args):
     V = energy.frame_space(mesh)
     start = time.perf_counter()
     q = energy.interpolate_frames(V, test_field)
-    problem = solver.frame_problem(q, isotropic=args.isotropic)
+    problem = solvers.frame_problem(q, isotropic=args.isotropic)
     t_setup = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     q0 = q.x.array.copy()
 
@@ -176,7 +178,7 @@ def bench_size(comm, h, args):
         q.x.array[:] = q0
         evaluations[0] = 0
         start_cpu = time.process_time()
-        result = solver.solve(
+        result = solvers.solve(
             problem,
             max_it=args.iterations,
             options_prefix="bench_",
@@ -186,7 +188,7 @@ def bench_size(comm, h, args):
         its = max(result.iterations, 1)
         solves.append(
             {
-                "type": solver.DEFAULT_OPTIONS["tao_type"] if tao_type == "default" else tao_type,
+                "type": solvers.DEFAULT_OPTIONS["tao_type"] if tao_type == "default" else tao_type,
                 "iter": (result.wall_time_s / its, cpu_solve / its),
                 "evals": evaluations[0] / its,
                 "its": result.iterations,
@@ -252,8 +254,8 @@ def refinement_study(comm, args):
     for h in args.study_sizes:
         mesh = geometry.annulus(comm, mesh_size=h).mesh
         q = mbo.mbo_frame_field(energy.frame_space(mesh))
-        problem = solver.frame_problem(q, isotropic=True)
-        result = solver.solve(
+        problem = solvers.frame_problem(q, isotropic=True)
+        result = solvers.solve(
             problem,
             max_it=args.study_max_it,
             options_prefix="study_",
@@ -262,7 +264,7 @@ def refinement_study(comm, args):
         rows.append((h, mesh.topology.index_map(2).size_global, result))
     if comm.rank != 0:
         return
-    name = solver.DEFAULT_OPTIONS["tao_type"] if tao_type == "default" else tao_type
+    name = solvers.DEFAULT_OPTIONS["tao_type"] if tao_type == "default" else tao_type
     print(f"\nResidual H of the isotropic annulus (from MBO, TAO {name}):")
     print(f"{'h':>8} {'triangles':>10} {'H residual':>12} {'rate':>6} {'its':>5} {'s':>7}  reason")
     previous = None

@@ -77,7 +77,7 @@
 # [u, v]_i = C_{ijkl}\, q_l\, \frac{\partial q_j}{\partial x_k},
 # $$
 #
-# with a constant tensor $C$ (derived symbolically; `ufl_frames.bracket`). The
+# with a constant tensor $C$ (derived symbolically; `ufl_frames.frames2d.bracket`). The
 # integrability energy (note eq. 11) is
 #
 # $$
@@ -119,7 +119,7 @@
 # $$
 #
 # where $R$ is steps (4)–(5), $\alpha$ comes from a line search, and the $H^1$ damping
-# $\lambda$ shrinks with the gradient (`ufl_frames.solver.GaussNewtonModel`). For
+# $\lambda$ shrinks with the gradient (`ufl_frames.solvers.GaussNewtonModel`). For
 # isotropic frames the default replaces $J^\top J$ by the exact Riemannian Hessian:
 # $\nabla^2 H$ (a second `ufl.derivative`) plus the curvature of the constraints — the
 # second fundamental form of the Odeco variety paired with the normal part of
@@ -168,16 +168,12 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import (  # noqa: E402
-    energy,
-    geometry,
-    io,
-    mbo,
-    odeco,
-    projection,
-    singularities,
-    solver,
-)
+from ufl_frames import geometry, io, solvers  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.fem.constraints import frame_constraints  # noqa: E402
+from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
+from ufl_frames.frames2d import odeco, singularities  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
 comm = MPI.COMM_WORLD
 CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false")
@@ -241,10 +237,9 @@ io.plot_frames(out / "frames_initial.png", q0, title="Annulus: MBO initial field
 q_exact = energy.interpolate_frames(
     V, lambda x: (np.hypot(x[0], x[1]), np.hypot(x[0], x[1]), np.arctan2(x[1], x[0]))
 )
-constraints = projection.frame_constraints(V, isotropic=True)
-norm2 = projection.weighted_norm2(q0.x.array.reshape(-1, 5), constraints)
-q_exact.x.array[:] = projection.normalise_rows(
-    q_exact.x.array.reshape(-1, 5), constraints, norm2).ravel()
+cone = FrameManifold(frame_constraints(V, isotropic=True))
+on_sphere = FrameManifold(cone.constraints, radius2=cone.norm2(q0.x.array.reshape(-1, 5)))
+q_exact.x.array[:] = on_sphere.normalise(q_exact.x.array.reshape(-1, 5)).ravel()
 H_exact = energy.integrability_energy(q_exact)
 say(f"interpolated exact isotropic field: H = {H_exact:.4e}")
 
@@ -253,9 +248,9 @@ say(f"interpolated exact isotropic field: H = {H_exact:.4e}")
 
 # ### Solving
 #
-# `solver.frame_problem` compiles the forms, finds the constraints (boundary
+# `solvers.frame_problem` compiles the forms, finds the constraints (boundary
 # vertices, and the vertices of singular triangles, of which the annulus has none)
-# and retracts $q$ onto $\mathcal M_h$; `solver.solve` runs TAO and leaves the result
+# and retracts $q$ onto $\mathcal M_h$; `solvers.solve` runs TAO and leaves the result
 # in `problem.q`. TAO does not raise when it fails: the converged reason is checked
 # explicitly. A run cut short by the iteration limit in CI mode is accepted.
 
@@ -288,17 +283,17 @@ def make_monitor(times, every=5):
 # The isotropic solve starts from a copy of the MBO field:
 
 q_iso = q0.copy()
-problem_iso = solver.frame_problem(q_iso, isotropic=True)
+problem_iso = solvers.frame_problem(q_iso, isotropic=True)
 times_iso = []
-result_iso = solver.solve(problem_iso, max_it=max_it, monitor=make_monitor(times_iso))
+result_iso = solvers.solve(problem_iso, max_it=max_it, monitor=make_monitor(times_iso))
 check_converged(result_iso, "isotropic")
 
 # and the non-isotropic one from another copy:
 
 q_aniso = q0.copy()
-problem_aniso = solver.frame_problem(q_aniso, isotropic=False)
+problem_aniso = solvers.frame_problem(q_aniso, isotropic=False)
 times_aniso = []
-result_aniso = solver.solve(problem_aniso, max_it=max_it,
+result_aniso = solvers.solve(problem_aniso, max_it=max_it,
                             monitor=make_monitor(times_aniso))
 check_converged(result_aniso, "non-isotropic")
 
@@ -376,15 +371,15 @@ if not CI:
 #
 # The same non-isotropic problem, from the MBO field, with the note's method: TAO's
 # `bncg` with the plain gradient direction (`-pg_tao_bncg_type gd`) and an Armijo
-# line search — set as defaults by `solver.solve` for `bncg`. The options prefix
+# line search — set as defaults by `solvers.solve` for `bncg`. The options prefix
 # `pg_` keeps it apart from the command-line options of the main solves. It runs a
 # fixed number of iterations, so its converged reason is normally
 # `DIVERGED_MAXITS`; any other failure is an error.
 
 q_pg = q0.copy()
-problem_pg = solver.frame_problem(q_pg, isotropic=False)
+problem_pg = solvers.frame_problem(q_pg, isotropic=False)
 times_pg = []
-result_pg = solver.solve(problem_pg, max_it=pg_max_it, options_prefix="pg_",
+result_pg = solvers.solve(problem_pg, max_it=pg_max_it, options_prefix="pg_",
                          defaults={"tao_type": "bncg"}, monitor=make_monitor(times_pg, 50))
 say(f"projected gradient: {result_pg.converged_reason} after {result_pg.iterations} "
     f"iterations ({result_pg.wall_time_s:.2f} s): H = {result_pg.H_final:.4e}")

@@ -69,7 +69,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, geometry, io, mbo, odeco, singularities, solver  # noqa: E402
+from ufl_frames import geometry, io, solvers  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.frames2d import odeco, singularities  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
 comm = MPI.COMM_WORLD
 CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false")
@@ -151,8 +154,8 @@ def report_singularities(q, what):
 # The note's setting: the MBO field's $+1/4$ and $-1/4$ stay where they are.
 
 q_iso = q0.copy()
-problem_iso = solver.frame_problem(q_iso, isotropic=True, pin_singularities=True)
-result_iso = solver.solve(problem_iso, max_it=max_it, monitor=monitor)
+problem_iso = solvers.frame_problem(q_iso, isotropic=True, pin_singularities=True)
+result_iso = solvers.solve(problem_iso, max_it=max_it, monitor=monitor)
 check_converged(result_iso, "isotropic, pinned")
 found_iso = report_singularities(problem_iso.q, "isotropic, pinned")
 
@@ -169,8 +172,8 @@ found_iso = report_singularities(problem_iso.q, "isotropic, pinned")
 # orientation near the singularities from turning.
 
 q_free = q0.copy()
-problem_free = solver.frame_problem(q_free, isotropic=True, pin_singularities=False)
-result_free = solver.solve(problem_free, max_it=max_it, monitor=monitor)
+problem_free = solvers.frame_problem(q_free, isotropic=True, pin_singularities=False)
+result_free = solvers.solve(problem_free, max_it=max_it, monitor=monitor)
 check_converged(result_free, "isotropic, free")
 found_free = report_singularities(problem_free.q, "isotropic, free")
 say(f"H pinned / H free = {result_iso.H_final / result_free.H_final:.3g}")
@@ -195,9 +198,9 @@ say(f"H pinned / H free = {result_iso.H_final / result_free.H_final:.3g}")
 # number of iterations, under its own options prefix `unbounded_`):
 
 q_unbounded = q0.copy()
-problem_unbounded = solver.frame_problem(q_unbounded, isotropic=False,
+problem_unbounded = solvers.frame_problem(q_unbounded, isotropic=False,
                                          pin_singularities=True, max_aspect=None)
-result_unbounded = solver.solve(problem_unbounded, max_it=unbounded_it,
+result_unbounded = solvers.solve(problem_unbounded, max_it=unbounded_it,
                                 options_prefix="unbounded_")
 lengths, _ = odeco.q_to_frames(problem_unbounded.q.x.array.reshape(-1, 5))
 owned = V.dofmap.index_map.size_local
@@ -217,9 +220,9 @@ say(f"no aspect bound, {result_unbounded.iterations} iterations "
 # command line overrides).
 
 q_aniso = q0.copy()
-problem_aniso = solver.frame_problem(q_aniso, isotropic=False, pin_singularities=True,
+problem_aniso = solvers.frame_problem(q_aniso, isotropic=False, pin_singularities=True,
                                      max_aspect=4.0)
-result_aniso = solver.solve(problem_aniso, max_it=max_it, monitor=monitor,
+result_aniso = solvers.solve(problem_aniso, max_it=max_it, monitor=monitor,
                             defaults={"tao_gttol": 1e-5})
 check_converged(result_aniso, "non-isotropic, aspect <= 4, pinned")
 found_aniso = report_singularities(problem_aniso.q, "non-isotropic, pinned")

@@ -5,7 +5,7 @@ Modelled on DOLFINx's ``python/test/conftest.py``:
 * after every test, ``gc.collect()`` and a barrier on ``MPI.COMM_WORLD``, so that collective
   destructors (PETSc objects, DOLFINx meshes) run in step on all ranks;
 * tests marked ``serial`` are skipped when ``MPI.COMM_WORLD`` has more than one rank;
-* the global PETSc options database is restored after every test: ``solver.solve`` and
+* the global PETSc options database is restored after every test: ``solvers.solve`` and
   ``mbo.mbo_frame_field`` write their defaults into it, and an option left by one test
   (``tao_max_it``, say) would silently override another test's arguments.
 

@@ -1,9 +1,9 @@
-r"""The aspect-ratio bound of non-isotropic frames (:mod:`ufl_frames.odeco`, pure NumPy).
+r"""The aspect-ratio bound of non-isotropic frames (:mod:`ufl_frames.frames2d.odeco`, pure NumPy).
 
 At a fixed angle t the frames are q = s e_s(t) + d e_d(t) (s = l1 + l2, d = l1 − l2), and
 l_max/l_min ≤ A is the cone |d| ≤ κ s, κ = (A − 1)/(A + 1). So
 
-* :func:`odeco.clamp_aspect` must leave frames inside the cone alone (bit for bit) and
+* :func:`aspect.clamp_aspect` must leave frames inside the cone alone (bit for bit) and
   otherwise return the least-squares fit in that cone, which is checked against a
   brute-force search over a dense grid of the cone (s, u κ s), u ∈ [−1, 1];
 * :func:`odeco.project` / :func:`odeco.project_aligned` with ``max_aspect`` keep the angle
@@ -17,7 +17,8 @@ l_max/l_min ≤ A is the cone |d| ≤ κ s, κ = (A − 1)/(A + 1). So
 import numpy as np
 import pytest
 
-from ufl_frames import odeco
+from ufl_frames.frames2d import odeco
+from ufl_frames.frames2d.aspect import aspect_bound, clamp_aspect
 
 ASPECTS = [1.0, 1.5, 4.0, 10.0]
 ES2, ED2 = 19.0 / 64.0, 1.0 / 4.0  # |e_s|², |e_d|²
@@ -83,7 +84,7 @@ def test_clamp_leaves_frames_inside_the_bound_unchanged(aspect):
     s = rng.uniform(0.1, 3.0, 1000)
     d = rng.uniform(-1.0, 1.0, 1000) * kappa(aspect) * s
     d[:10] = kappa(aspect) * s[:10]  # exactly on the bound
-    s_out, d_out = odeco.clamp_aspect(s, d, aspect)
+    s_out, d_out = clamp_aspect(s, d, aspect)
     assert np.array_equal(s_out, s) and np.array_equal(d_out, d)
 
 
@@ -94,7 +95,7 @@ def test_clamp_is_the_least_squares_fit_in_the_cone(aspect):
     s = rng.uniform(-2.0, 3.0, 500)
     d = rng.uniform(-6.0, 6.0, 500)
     k = kappa(aspect)
-    s_out, d_out = odeco.clamp_aspect(s, d, aspect)
+    s_out, d_out = clamp_aspect(s, d, aspect)
     assert np.all(np.abs(d_out) <= k * s_out * (1 + 1e-12))
     assert np.all(s_out > 0)
     # The fit minimises ES2 (s' − s)² + ED2 (d' − d)² over the cone: compare with the
@@ -117,7 +118,7 @@ def test_clamp_is_the_least_squares_fit_in_the_cone(aspect):
 def test_clamp_rejects_bad_bounds():
     for bad in (0.5, 0.0, -2.0, np.nan, np.inf):
         with pytest.raises(ValueError, match="max_aspect"):
-            odeco.clamp_aspect(np.ones(3), np.zeros(3), bad)
+            clamp_aspect(np.ones(3), np.zeros(3), bad)
 
 
 # --- project with max_aspect ------------------------------------------------------
@@ -360,3 +361,13 @@ def test_tangent_basis_rejects_bad_bounds():
     for bad in (0.5, np.nan):
         with pytest.raises(ValueError, match="max_aspect"):
             odeco.tangent_basis(q, max_aspect=bad, gradient=np.zeros_like(q))
+
+
+def test_aspect_bound_rule():
+    """One rule: no bound for isotropic frames or an infinite/missing A, else A (checked)."""
+    assert aspect_bound(True, 4.0) is None
+    assert aspect_bound(False, float("inf")) is None
+    assert aspect_bound(False, None) is None
+    assert aspect_bound(False, 4) == 4.0
+    with pytest.raises(ValueError, match="max_aspect"):
+        aspect_bound(False, 0.5)

@@ -1,8 +1,8 @@
-"""Tests of the Lie-bracket tensor (note eq. 10, note-checks §3): :mod:`ufl_frames.bracket`.
+"""Tests of the Lie-bracket tensor (note eq. 10, note-checks §3) (frames2d.bracket).
 
 The gradient of q is computed exactly by the chain rule from q(s, d, t) (s = l1 + l2,
 d = l1 − l2) and the gradients of the lengths and the angle; the reference bracket
-:func:`~ufl_frames.bracket.lie_bracket_direct` is itself checked against finite
+:func:`~ufl_frames.frames2d.bracket.lie_bracket_direct` is itself checked against finite
 differences of explicit vector fields.
 """
 
@@ -12,7 +12,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from ufl_frames import bracket, odeco
+from ufl_frames.frames2d import bracket, odeco
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 SQRT2 = np.sqrt(2.0)

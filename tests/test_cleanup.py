@@ -1,4 +1,4 @@
-r"""No PETSc object outlives a failed :func:`solver.solve` or :func:`mbo.mbo_frame_field`.
+r"""No PETSc object outlives a failed :func:`solvers.solve` or :func:`mbo.mbo_frame_field`.
 
 Both own PETSc objects (the TAO, its vectors and the Gauss–Newton model; the MBO matrix,
 right-hand side and KSP) and destroy them however they end, in the same order on every
@@ -14,7 +14,7 @@ rank (the destroys are collective). Checked on the annulus at h = 0.2, by two co
 * :func:`alive_in_traceback`: while the caller still holds the exception, no PETSc
   object among the variables of the traceback's frames is alive: the call destroyed them
   before the exception reached the caller, not the garbage collector some time later.
-  Before the fix: ``x``, ``g``, ``tao`` of ``solver._solve`` and ``A``, ``rhs``, ``ksp``
+  Before the fix: ``x``, ``g``, ``tao`` of ``solvers._solve`` and ``A``, ``rhs``, ``ksp``
   of ``mbo_frame_field``.
 
 Each failure is followed by a normal call in the same process, which must give the same
@@ -36,8 +36,10 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import energy, geometry, mbo, solver
+from ufl_frames import geometry, solvers
 from ufl_frames.bootstrap import petsc_defaults
+from ufl_frames.fem import energy
+from ufl_frames.solvers import mbo
 
 COMM = MPI.COMM_WORLD
 MAX_IT = 5
@@ -105,7 +107,7 @@ def fresh_problem(mbo_field):
     V, start = mbo_field
     q = dolfinx.fem.Function(V, name="q")
     q.x.array[:] = start
-    return solver.frame_problem(q, max_aspect=4.0)
+    return solvers.frame_problem(q, max_aspect=4.0)
 
 
 @pytest.mark.parametrize("tao_type", ["nls", "bncg"])
@@ -116,7 +118,7 @@ def test_monitor_error_reaches_caller_and_leaks_nothing(mbo_field, tao_type):
     defaults = {"tao_type": tao_type}
     with petsc_defaults(prefix, defaults):
         reference_problem = fresh_problem(mbo_field)
-        reference = solver.solve(reference_problem, max_it=MAX_IT, options_prefix=prefix)
+        reference = solvers.solve(reference_problem, max_it=MAX_IT, options_prefix=prefix)
         reference_q = reference_problem.q.x.array.copy()
         assert reference.iterations >= 3  # the monitor below does get to iteration 2
         del reference_problem
@@ -131,7 +133,7 @@ def test_monitor_error_reaches_caller_and_leaks_nothing(mbo_field, tao_type):
                 raise MonitorError("stop at iteration 2")
 
         with pytest.raises(MonitorError) as excinfo:
-            solver.solve(problem, max_it=MAX_IT, options_prefix=prefix, monitor=monitor)
+            solvers.solve(problem, max_it=MAX_IT, options_prefix=prefix, monitor=monitor)
         assert excinfo.type is MonitorError
         assert str(excinfo.value) == "stop at iteration 2"
         assert seen == [0, 1, 2]
@@ -140,7 +142,7 @@ def test_monitor_error_reaches_caller_and_leaks_nothing(mbo_field, tao_type):
         assert_no_leak(before)
 
         problem = fresh_problem(mbo_field)
-        again = solver.solve(problem, max_it=MAX_IT, options_prefix=prefix)
+        again = solvers.solve(problem, max_it=MAX_IT, options_prefix=prefix)
     assert again.converged_reason == reference.converged_reason
     assert again.iterations == reference.iterations
     assert [e["H"] for e in again.history] == pytest.approx(
@@ -157,7 +159,7 @@ def test_bad_hessian_option_leaks_nothing(mbo_field):
     before = live_petsc_objects()
     with petsc_defaults(prefix, {"frames_hessian": "newton"}):
         with pytest.raises(ValueError, match="-frames_hessian must be") as excinfo:
-            solver.solve(problem, max_it=MAX_IT, options_prefix=prefix)
+            solvers.solve(problem, max_it=MAX_IT, options_prefix=prefix)
     assert_none_alive_in(excinfo)
     del excinfo
     assert_no_leak(before)
@@ -177,7 +179,7 @@ def test_model_construction_error_leaks_nothing(mbo_field, monkeypatch):
     before = live_petsc_objects()
     monkeypatch.setattr(dolfinx.fem.petsc, "assemble_matrix", failing)
     with pytest.raises(MonitorError, match="no Sobolev matrix") as excinfo:
-        solver.solve(problem, max_it=MAX_IT, options_prefix="cleanup_model_")
+        solvers.solve(problem, max_it=MAX_IT, options_prefix="cleanup_model_")
     monkeypatch.undo()
     assert_none_alive_in(excinfo)
     del excinfo

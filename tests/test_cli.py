@@ -19,7 +19,7 @@ init_petsc([])  # not pytest's command line
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from ufl_frames import __version__, cli, solver  # noqa: E402
+from ufl_frames import __version__, cli, solvers  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 MPIRUN = Path(sys.prefix) / "bin" / "mpirun"
@@ -94,7 +94,7 @@ def test_summary_keys_and_consistency(annulus_run):
     assert 0.1 < on_disk["mesh_size"] <= 0.2
     # The annulus: no singularity, and Poincaré–Hopf (χ = 0, no corners) agrees.
     assert on_disk["poincare_hopf"]["agrees"] and on_disk["poincare_hopf"]["expected"] == 0
-    assert on_disk["tao_type"] == solver.DEFAULT_OPTIONS["tao_type"] == "nls"
+    assert on_disk["tao_type"] == solvers.DEFAULT_OPTIONS["tao_type"] == "nls"
     assert on_disk["num_vertices"] > 50 and on_disk["num_cells"] > on_disk["num_vertices"]
     assert on_disk["H_final"] <= on_disk["H_initial"]
     history = on_disk["history"]

@@ -1,4 +1,4 @@
-r"""The discrete energies of :mod:`ufl_frames.energy` against independent truth.
+r"""The discrete energies of :mod:`ufl_frames.fem.energy` against independent truth.
 
 Exact values come from hand calculations with explicit frames, never from the package:
 
@@ -29,8 +29,9 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from ufl_frames import energy, odeco
-from ufl_frames.bracket import BRACKET_TENSOR
+from ufl_frames.fem import energy
+from ufl_frames.frames2d import odeco
+from ufl_frames.frames2d.bracket import BRACKET_TENSOR
 
 # --- frame fields f(x) -> (l1, l2, t), x of shape (3, M) --------------------------
 

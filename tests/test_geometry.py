@@ -17,8 +17,8 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import geometry  # noqa: E402
+from ufl_frames.frames2d.singularities import locate_singularities  # noqa: E402
 from ufl_frames.geometry import GeometryError  # noqa: E402
-from ufl_frames.singularities import locate_singularities  # noqa: E402
 
 MESHES = Path(__file__).resolve().parents[1] / "meshes"
 COMM = MPI.COMM_WORLD

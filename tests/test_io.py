@@ -15,7 +15,9 @@ import dolfinx  # noqa: E402
 import dolfinx.io  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, io, odeco  # noqa: E402
+from ufl_frames import io  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.frames2d import odeco  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

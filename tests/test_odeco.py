@@ -1,4 +1,4 @@
-"""Tests of the pointwise Odeco algebra :mod:`ufl_frames.odeco` (pure NumPy, no DOLFINx).
+"""Tests of the pointwise Odeco algebra :mod:`ufl_frames.frames2d.odeco` (pure NumPy, no DOLFINx).
 
 The references used here do not go through ``odeco``'s own formulas: the tensor
 polynomial p(φ) = T_ijkl x_i x_j x_k x_l is evaluated directly from the frame
@@ -27,7 +27,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ufl_frames import odeco
+from ufl_frames.frames2d import odeco
 
 # Random exploration on developer runs (it found real bugs); a fixed sequence in CI.
 SETTINGS = settings(

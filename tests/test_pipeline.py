@@ -12,7 +12,8 @@ init_petsc([])  # not pytest's command line
 from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import geometry, io  # noqa: E402
-from ufl_frames.pipeline import FrameField, aspect_bound  # noqa: E402
+from ufl_frames.frames2d.aspect import aspect_bound  # noqa: E402
+from ufl_frames.pipeline import FrameField  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 
@@ -49,15 +50,16 @@ def test_solver_reuses_the_mbo_constraints():
     """frame_problem(constraints=...) equals the constraints found afresh for the solver."""
     import numpy as np
 
-    from ufl_frames import projection, solver
+    from ufl_frames import solvers
+    from ufl_frames.fem.constraints import frame_constraints
 
     field = FrameField.initial(geometry.annulus(COMM, 0.2), isotropic=False, max_aspect=3.0)
     q0 = field.q.x.array.copy()
-    reused = solver.frame_problem(field.q, max_aspect=3.0, constraints=field.constraints,
+    reused = solvers.frame_problem(field.q, max_aspect=3.0, constraints=field.constraints,
                                   pin_singularities=False).constraints
     field.q.x.array[:] = q0
-    fresh = projection.frame_constraints(field.q.function_space, max_aspect=3.0,
-                                         boundary_angles=field.boundary_angles)
+    fresh = frame_constraints(field.q.function_space, max_aspect=3.0,
+                              boundary_angles=field.boundary_angles)
     assert reused.max_aspect == fresh.max_aspect == 3.0 and not reused.isotropic
     for name in ("boundary", "normals", "weights"):
         assert np.array_equal(getattr(reused, name), getattr(fresh, name)), name

@@ -16,8 +16,12 @@ import gmsh  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, geometry, mbo, projection, singularities  # noqa: E402
+from ufl_frames import geometry  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.fem.constraints import frame_constraints  # noqa: E402
+from ufl_frames.frames2d import singularities  # noqa: E402
 from ufl_frames.geometry import GeometryError  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 
@@ -344,7 +348,7 @@ def test_poincare_hopf_on_test_geometries(tmp_path, name):
     angles = [c.angle for c in domain.corners]
     assert singularities.poincare_hopf_sum(chi, angles) == expected
     V = energy.frame_space(domain.mesh)
-    constraints = projection.frame_constraints(V, boundary_angles=domain.boundary_angles(V))
+    constraints = frame_constraints(V, boundary_angles=domain.boundary_angles(V))
     q = mbo.mbo_frame_field(V, constraints=constraints)
     found = singularities.locate_singularities(q)
     check = singularities.index_theorem(found, chi, angles)

@@ -1,4 +1,4 @@
-r"""The ingredients of the second-order solvers (:mod:`ufl_frames.solver`), checked numerically.
+r"""The ingredients of the second-order solvers (:mod:`ufl_frames.solvers`), checked numerically.
 
 The solver minimises f(x) = H(R(x)) over the scaled unknowns x = √m q, R the retraction
 (pointwise projection and normalisation, note §3 steps 4–5). It needs
@@ -46,8 +46,11 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from ufl_frames import energy, geometry, mbo, odeco, projection, solver
+from ufl_frames import geometry, solvers
 from ufl_frames.bootstrap import petsc_defaults
+from ufl_frames.fem import energy
+from ufl_frames.frames2d import odeco
+from ufl_frames.solvers import mbo
 
 COMM = MPI.COMM_WORLD
 
@@ -70,7 +73,7 @@ def tangent(problem, rows, x):
     """
     n = problem.owned
     v = x.duplicate()
-    v.getArray()[:] = projection.tangent_project_rows(problem.rows, rows, problem.constraints)[
+    v.getArray()[:] = problem.manifold.tangent_project(problem.rows, rows)[
         :n
     ].ravel()
     v.axpy(-v.dot(x) / x.dot(x), x)
@@ -130,7 +133,7 @@ def second_difference(func, eps):
 def gauss_newton(problem, x):
     """Undamped GaussNewtonModel at R(x) (gradient evaluated first, as TAO does)."""
     gradient_at(problem, x)
-    return solver.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0)
+    return solvers.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0)
 
 
 def apply(model, d):
@@ -147,7 +150,7 @@ def constant_field(comm, isotropic, cells=8):
     q.x.array[:] = np.tile(
         odeco.frames_to_q(np.array(lengths), np.zeros(1)), (q.x.array.size // 5, 1)
     ).ravel()
-    return solver.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
+    return solvers.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
 
 
 def moved(problem, x, s, w):
@@ -166,8 +169,8 @@ def moved(problem, x, s, w):
 def _annulus_solve():
     mesh = geometry.build(COMM, "annulus", 0.1).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
-    problem = solver.frame_problem(q, isotropic=True)
-    result = solver.solve(problem, max_it=60, options_prefix="second_order_")
+    problem = solvers.frame_problem(q, isotropic=True)
+    result = solvers.solve(problem, max_it=60, options_prefix="second_order_")
     return problem, result, q.x.array.copy()
 
 
@@ -190,7 +193,7 @@ def test_riemannian_gradient_matches_central_differences(name, isotropic):
     """g·d = d/dε H(R(x + εd)) on the MBO field (the piano: with pinned singular triangles)."""
     mesh = geometry.build(COMM, name, 0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
-    problem = solver.frame_problem(
+    problem = solvers.frame_problem(
         q, isotropic=isotropic, pin_singularities=True, max_aspect=None if isotropic else 4.0
     )
     x = scaled_x(problem)
@@ -280,7 +283,7 @@ def test_gauss_newton_maps_tangents_to_tangents_and_normals_to_mu(annulus_soluti
     rng = np.random.default_rng([11, COMM.rank])
     v = x.duplicate()
     raw = rng.standard_normal(problem.rows.shape)
-    normal = raw - projection.tangent_project_rows(problem.rows, raw, problem.constraints)
+    normal = raw - problem.manifold.tangent_project(problem.rows, raw)
     v.getArray()[:] = normal[: problem.owned].ravel()
     assert abs(v.dot(x)) <= 1e-10 * v.norm() * x.norm()
     for vec in (v, x):
@@ -420,7 +423,7 @@ def test_default_method_converges_superlinearly(annulus_solution):
 def test_default_method_iteration_count_regression(annulus_solution):
     """Default TAO type (Gauss–Newton ``nls``), isotropic annulus, h = 0.1: 13 its measured."""
     problem, result = annulus_solution
-    assert solver.DEFAULT_OPTIONS["tao_type"] == "nls"
+    assert solvers.DEFAULT_OPTIONS["tao_type"] == "nls"
     assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
     assert result.iterations <= 20, result.iterations
 
@@ -435,14 +438,14 @@ def test_exact_hessian_is_the_riemannian_hessian_at_a_critical_point():
     comm = MPI.COMM_WORLD
     mesh = geometry.piano(comm, mesh_size=0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
-    problem = solver.frame_problem(q, isotropic=True, pin_singularities=True)
+    problem = solvers.frame_problem(q, isotropic=True, pin_singularities=True)
     with petsc_defaults("crit_", {"tao_gttol": 1e-11, "tao_nls_ksp_rtol": 1e-12}):
-        result = solver.solve(problem, max_it=60, options_prefix="crit_")
+        result = solvers.solve(problem, max_it=60, options_prefix="crit_")
     assert result.converged_reason.startswith("CONVERGED")
     x = scaled_x(problem)
     gradient_at(problem, x)
-    exact = solver.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0, exact=True)
-    gauss_newton_only = solver.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0)
+    exact = solvers.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0, exact=True)
+    gauss_newton_only = solvers.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0)
     for phase in (0.0, 1.3):
         d = smooth_tangent(problem, x, phase)
         fd = second_difference(lambda e, d=d: f_along(problem, x, d, e), 1e-3)

@@ -1,4 +1,4 @@
-r"""TAO's Hessian perturbation reaches :class:`solver.GaussNewtonModel` exactly once.
+r"""TAO's Hessian perturbation reaches :class:`solvers.GaussNewtonModel` exactly once.
 
 What PETSc does (3.25; ``src/tao/unconstrained/impls/nls/nls.c``, ``TaoSolve_NLS``, and
 the same in ``src/tao/bound/impls/bnk/bnk.c``, ``TaoBNKComputeStep``, for ``bnls``):
@@ -26,7 +26,7 @@ Checked here, on the annulus at h = 0.2 (Gauss–Newton on non-isotropic frames,
 Hessian on isotropic ones, so that the sphere's curvature term is exercised too):
 
 * after ``MatShift`` on both matrices, exactly as TAO does, the shell applies
-  B v + a v, B from the formula of :class:`solver.GaussNewtonModel` on a copy of the
+  B v + a v, B from the formula of :class:`solvers.GaussNewtonModel` on a copy of the
   unshifted pre-matrix (random v, parallel); the same when only the shell is shifted;
   shifts add up, and the next Hessian evaluation (``update``) starts unshifted;
 * serially, the dense matrix of the shifted shell (applied to unit vectors) equals the
@@ -45,8 +45,10 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import energy, geometry, mbo, solver
+from ufl_frames import geometry, solvers
 from ufl_frames.bootstrap import petsc_defaults
+from ufl_frames.fem import energy
+from ufl_frames.solvers import mbo
 
 COMM = MPI.COMM_WORLD
 RTOL = 1e-11  # round-off of a few sparse products against |B| ~ μ
@@ -65,7 +67,7 @@ def setting(request, _field):
     q, start = _field
     q.x.array[:] = start
     isotropic = exact = request.param
-    problem = solver.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
+    problem = solvers.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
     return problem, exact
 
 
@@ -80,14 +82,14 @@ class _Tao:
 
 
 def model_at(problem, exact):
-    """A model set up as ``solver._solve`` does, then updated at the start as TAO does."""
+    """A model set up as ``solvers._solve`` does, then updated at the start as TAO does."""
     x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
     problem.retract()
     problem.write_x(x)
     g = x.duplicate()
     problem.set_from_x(x)
     problem.riemannian_gradient(g)  # TAO evaluates the gradient before the Hessian
-    model = solver.GaussNewtonModel(problem, x, exact=exact)
+    model = solvers.GaussNewtonModel(problem, x, exact=exact)
     model.update(_Tao(g), x, model.shell, model.assembled)
     return model, x, g
 
@@ -242,13 +244,13 @@ def test_tao_perturbed_newton_step(tao_type):
     """TAO with the perturbation forced: its step d solves (B + pert I) d = −g.
 
     One iteration of ``nls`` / ``bnls`` from the MBO field (Gauss–Newton, non-isotropic),
-    set up as ``solver._solve`` does, with ``-tao_*_sval`` = μ (so pert = μ from the first
+    set up as ``solvers._solve`` does, with ``-tao_*_sval`` = μ (so pert = μ from the first
     iteration on), CG to 1e-12 with Jacobi on the (shifted) pre-matrix and a unit step
     (``-tao_ls_type unit``): x₁ − x₀ is the Newton direction TAO computed.
     """
     mesh = geometry.annulus(COMM, 0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
-    problem = solver.frame_problem(q, max_aspect=4.0)
+    problem = solvers.frame_problem(q, max_aspect=4.0)
     probe, x0, _ = model_at(problem, exact=False)
     pert = probe.mu
     probe.free()
@@ -268,7 +270,7 @@ def test_tao_perturbed_newton_step(tao_type):
         problem.set_from_x(tao.getSolution())
         problem.write_x(tao.getSolution())
 
-    model = solver.GaussNewtonModel(problem, x)
+    model = solvers.GaussNewtonModel(problem, x)
     seen = {}
 
     def hessian(tao, x, H, P):

@@ -1,4 +1,4 @@
-"""Triangle indices of cross fields (ufl_frames.singularities), NumPy and DOLFINx sides."""
+"""Triangle indices of cross fields (ufl_frames.frames2d.singularities), NumPy and DOLFINx sides."""
 
 import subprocess
 import sys
@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from ufl_frames.singularities import (
+from ufl_frames.frames2d.singularities import (
     find_singularities,
     index_theorem,
     locate_singularities,
@@ -159,7 +159,7 @@ def test_input_checks():
 @pytest.mark.serial
 def test_module_imports_without_dolfinx():
     code = (
-        "import sys, ufl_frames.singularities; "
+        "import sys, ufl_frames.frames2d.singularities; "
         "assert 'dolfinx' not in sys.modules, 'dolfinx imported'; "
         "assert 'petsc4py' not in sys.modules, 'petsc4py imported'"
     )

@@ -1,4 +1,4 @@
-r"""The TAO frame-field solver (:mod:`ufl_frames.solver`) on the annulus.
+r"""The TAO frame-field solver (:mod:`ufl_frames.solvers`) on the annulus.
 
 Truth (note-checks §4): the integrable annulus fields aligned with the boundary are
 (g(r) e_r, c r e_θ) with any radial g, and isotropic ones (c r e_r, c r e_θ). So from
@@ -28,14 +28,17 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import energy, mbo, odeco, solver
+from ufl_frames import solvers
+from ufl_frames.fem import energy
+from ufl_frames.frames2d import odeco
+from ufl_frames.solvers import mbo
 
 
 def mbo_problem(annulus_mesh, h, isotropic, comm=MPI.COMM_WORLD, mbo_prefix="mbo_"):
     mesh = annulus_mesh(h, comm)
     mesh = getattr(mesh, "mesh", mesh)  # a mesh, or a geometry.Domain holding one
     q = mbo.mbo_frame_field(energy.frame_space(mesh), options_prefix=mbo_prefix)
-    return solver.frame_problem(q, isotropic=isotropic)
+    return solvers.frame_problem(q, isotropic=isotropic)
 
 
 def radial_and_tangential(problem):
@@ -77,7 +80,7 @@ def test_isotropic_annulus_from_mbo(annulus_mesh):
     comm = MPI.COMM_WORLD
     problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
     H0 = problem.energy()
-    result = solver.solve(problem, max_it=30, options_prefix="iso_")
+    result = solvers.solve(problem, max_it=30, options_prefix="iso_")
     check_reason(result)
     H = problem.energy()
     assert H == pytest.approx(result.H_final, rel=1e-12)
@@ -114,7 +117,7 @@ def test_nonisotropic_annulus_tangential_length(annulus_mesh, tao_type, max_it):
     comm = MPI.COMM_WORLD
     problem = mbo_problem(annulus_mesh, 0.1, isotropic=False)
     H0 = problem.energy()
-    result = solver.solve(
+    result = solvers.solve(
         problem, max_it=max_it, options_prefix="noniso_", defaults={"tao_type": tao_type}
     )
     check_reason(result)
@@ -150,7 +153,7 @@ def test_residual_energy_vanishes_under_refinement(annulus_mesh):
     sizes, residuals, iterations = [], [], []
     for h in (0.1, 0.05):
         problem = mbo_problem(annulus_mesh, h, isotropic=True)
-        result = solver.solve(problem, max_it=100, options_prefix="refine_")
+        result = solvers.solve(problem, max_it=100, options_prefix="refine_")
         assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
         cells = problem.q.function_space.mesh.topology.index_map(2).size_global
         sizes.append(1.0 / math.sqrt(cells))
@@ -181,7 +184,7 @@ def test_parallel_history_matches_serial(annulus_mesh, tao_type):
     histories = {}
     for name, comm in (("self", MPI.COMM_SELF), ("world", MPI.COMM_WORLD)):
         problem = mbo_problem(annulus_mesh, 0.1, True, comm=comm, mbo_prefix="exact_mbo_")
-        result = solver.solve(
+        result = solvers.solve(
             problem, max_it=30, options_prefix=f"{name}_", defaults={"tao_type": tao_type}
         )
         histories[name] = np.array([[e["H"], e["E"]] for e in result.history])
@@ -204,20 +207,20 @@ def test_tao_options_are_honoured(annulus_mesh):
     opts = PETSc.Options()
     try:
         opts["tao_max_it"] = 3
-        result = solver.solve(problem, max_it=30, defaults={"tao_type": "lmvm"})
+        result = solvers.solve(problem, max_it=30, defaults={"tao_type": "lmvm"})
         assert result.converged_reason == "DIVERGED_MAXITS"
         assert result.iterations == 3
 
         problem.q.x.array[:] = q0
         opts["opt_tao_type"] = "lmvm"
         opts["opt_tao_max_it"] = 5
-        result = solver.solve(problem, max_it=30, options_prefix="opt_")
+        result = solvers.solve(problem, max_it=30, options_prefix="opt_")
         assert result.converged_reason == "DIVERGED_MAXITS"
         assert result.iterations == 5
 
         problem.q.x.array[:] = q0
         opts["opt_tao_gatol"] = 1e6  # stop at once: the gradient norm is far below
-        result = solver.solve(problem, max_it=30, options_prefix="opt_")
+        result = solvers.solve(problem, max_it=30, options_prefix="opt_")
         assert result.converged_reason == "CONVERGED_GATOL"
         assert result.iterations == 0
     finally:
@@ -231,10 +234,11 @@ def test_defaults_of_one_solve_do_not_leak_into_the_next(annulus_mesh):
     problem = mbo_problem(annulus_mesh, 0.1, isotropic=True)
     q0 = problem.q.x.array.copy()
     before = PETSc.Options().getAll()
-    solver.solve(problem, max_it=2, options_prefix="twice_", defaults={"tao_type": "lmvm"})
+    solvers.solve(problem, max_it=2, options_prefix="twice_", defaults={"tao_type": "lmvm"})
     assert PETSc.Options().getAll() == before
     problem.q.x.array[:] = q0
-    result = solver.solve(problem, max_it=4, options_prefix="twice_", defaults={"tao_type": "lmvm"})
+    result = solvers.solve(problem, max_it=4, options_prefix="twice_",
+                           defaults={"tao_type": "lmvm"})
     assert result.iterations == 4
 
 
@@ -285,7 +289,7 @@ def integrable_fields(tmp_path_factory):
 def fresh_problem(fields, name, isotropic):
     q, q0 = fields[name]
     q.x.array[:] = q0
-    return solver.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
+    return solvers.frame_problem(q, isotropic=isotropic, max_aspect=None if isotropic else 4.0)
 
 
 @pytest.mark.parametrize("isotropic", [False, True], ids=["frames", "isotropic"])
@@ -302,11 +306,11 @@ def test_integrable_field_stops_at_once(integrable_fields, name, tao_type, isotr
     problem = fresh_problem(integrable_fields, name, isotropic)
     q0 = problem.q.x.array.copy()
     assert problem.energy() <= 1e-20 * problem.energy_scale  # H, not only |g|, is round-off
-    result = solver.solve(problem, max_it=50, options_prefix=f"int_{tao_type}_",
+    result = solvers.solve(problem, max_it=50, options_prefix=f"int_{tao_type}_",
                           defaults={"tao_type": tao_type})
     assert result.converged_reason == "CONVERGED_MINF", result.converged_reason
     assert result.iterations == 0 and len(result.history) == 1
-    assert result.H_initial <= solver.ENERGY_RTOL * problem.energy_scale
+    assert result.H_initial <= solvers.ENERGY_RTOL * problem.energy_scale
     assert np.allclose(problem.q.x.array, q0, rtol=0, atol=1e-12)
 
 
@@ -323,7 +327,7 @@ def test_each_scale_relative_test_stops_alone(integrable_fields, tao_type, defau
     """Either default stops the integrable rectangle: |g_0| ≈ 1e-9 G ≤ gttol G, and
     H_0 ≈ 1e-22 H_s ≤ ENERGY_RTOL H_s."""
     problem = fresh_problem(integrable_fields, "rectangle", isotropic=False)
-    result = solver.solve(problem, max_it=50, options_prefix=f"alone_{tao_type}_",
+    result = solvers.solve(problem, max_it=50, options_prefix=f"alone_{tao_type}_",
                           defaults={"tao_type": tao_type, **defaults})
     assert result.converged_reason == reason
     assert result.iterations == 0
@@ -335,13 +339,13 @@ def test_damping_reference_is_never_zero(integrable_fields):
     problem = fresh_problem(integrable_fields, "rectangle", isotropic=False)
     x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
     problem.write_x(x)
-    model = solver.GaussNewtonModel(problem, x)
+    model = solvers.GaussNewtonModel(problem, x)
     try:
         G = problem.gradient_scale
-        model._assemble(model.assembled, gnorm=0.0)  # the initial iterate: |g_0| = 0
+        model.assemble(gnorm=0.0)  # the initial iterate: |g_0| = 0
         assert model.gnorm0 == G
         lam_floor = model.lam
-        model._assemble(model.assembled, gnorm=0.5 * G)
+        model.assemble(gnorm=0.5 * G)
         assert np.isfinite(model.lam) and model.lam == pytest.approx(500 * lam_floor)
     finally:
         model.free()
@@ -355,7 +359,7 @@ def test_scales_do_not_depend_on_mesh_or_size(tmp_path):
     relative = []
     for s, h in ((1, 0.1), (10, 1.0), (1, 0.05)):
         q = polygon_mbo_field(tmp_path, f"trapezoid{s}_{h}", points * s, h)
-        problem = solver.frame_problem(q, max_aspect=4.0)
+        problem = solvers.frame_problem(q, max_aspect=4.0)
         g = dolfinx.fem.petsc.create_vector(q.function_space)
         H = problem.riemannian_gradient(g)
         gnorm = g.norm()
@@ -374,10 +378,10 @@ def test_nearly_integrable_field_is_not_stopped_early(tmp_path, tao_type, max_it
     |g_0| ≈ 1e-3 G. The solve runs and lowers H (nls: 80x in 2 steps, measured)."""
     comm = MPI.COMM_WORLD
     q = polygon_mbo_field(tmp_path, "trapezoid", [(0, 0), (2, 0), (2, 1.0001), (0, 1)], 0.1)
-    problem = solver.frame_problem(q, max_aspect=4.0)
+    problem = solvers.frame_problem(q, max_aspect=4.0)
     H0 = problem.energy()
     assert 1e-10 < H0 / problem.energy_scale < 1e-7
-    result = solver.solve(problem, max_it=max_it, options_prefix=f"near_{tao_type}_",
+    result = solvers.solve(problem, max_it=max_it, options_prefix=f"near_{tao_type}_",
                           defaults={"tao_type": tao_type})
     history = np.array([entry["H"] for entry in result.history])
     if comm.rank == 0:
@@ -398,18 +402,18 @@ def test_one_retraction_per_vector_state(annulus_mesh, monkeypatch):
     """During a solve, TAO's callbacks at the same iterate retract once (tracking), and the
     result is the one without the shortcut."""
     calls = []
-    retract = solver.FrameProblem.retract
-    monkeypatch.setattr(solver.FrameProblem, "retract",
+    retract = solvers.FrameProblem.retract
+    monkeypatch.setattr(solvers.FrameProblem, "retract",
                         lambda self: (calls.append(1), retract(self))[1])
     problem = mbo_problem(annulus_mesh, 0.2, isotropic=True)
     q0 = problem.q.x.array.copy()
-    tracked = solver.solve(problem, max_it=6)
+    tracked = solvers.solve(problem, max_it=6)
     with_tracking = len(calls)
     # Without it: every set_from_x retracts (tracking() entered, then switched off).
     calls.clear()
     problem.q.x.array[:] = q0
-    monkeypatch.setattr(solver.FrameProblem, "_mark_synced", lambda self, x: None)
-    plain = solver.solve(problem, max_it=6)
+    monkeypatch.setattr(solvers.FrameProblem, "_mark_synced", lambda self, x: None)
+    plain = solvers.solve(problem, max_it=6)
     assert with_tracking < 0.7 * len(calls)
     assert tracked.iterations == plain.iterations
     assert tracked.H_final == pytest.approx(plain.H_final, rel=1e-10)

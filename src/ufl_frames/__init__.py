@@ -1,10 +1,15 @@
 """ufl_frames: integrable 2D frame fields from Odeco tensors.
 
-The pointwise mathematics (:mod:`ufl_frames.odeco`, :mod:`ufl_frames.bracket`) is
-pure NumPy. Everything that assembles or solves (:mod:`ufl_frames.energy`,
-:mod:`ufl_frames.mbo`, :mod:`ufl_frames.solver`, ...) needs DOLFINx; import
-:mod:`ufl_frames.bootstrap` first (and call :func:`~ufl_frames.bootstrap.init_petsc`
-with ``sys.argv``) so that PETSc options from the command line are honoured.
+* :mod:`ufl_frames.frames2d`: the pointwise algebra of frames, pure NumPy;
+* :mod:`ufl_frames.fem`: the P1 space, UFL energies, constraints and the frame
+  manifold (DOLFINx);
+* :mod:`ufl_frames.solvers`: the MBO initial field and the TAO minimisation;
+* :mod:`ufl_frames.geometry`, :mod:`ufl_frames.pipeline` (``FrameField``),
+  :mod:`ufl_frames.io`, :mod:`ufl_frames.cli`: meshing, the whole run, files, commands.
+
+Everything outside ``frames2d`` needs DOLFINx; import :mod:`ufl_frames.bootstrap` first
+(and call :func:`~ufl_frames.bootstrap.init_petsc` with ``sys.argv``) so that PETSc
+options from the command line are honoured.
 """
 
 __version__ = "0.1.0"

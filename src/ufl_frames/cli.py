@@ -9,7 +9,7 @@
 
 GEOMETRY is ``annulus``, ``piano`` or a ``.geo``/``.msh``/``.step``/``.brep`` file
 (:func:`ufl_frames.geometry.build`). The run is: mesh → MBO initial field
-(:mod:`ufl_frames.mbo`) → TAO minimisation of H (:mod:`ufl_frames.solver`) →
+(:mod:`ufl_frames.solvers.mbo`) → TAO minimisation of H (:mod:`ufl_frames.solvers`) →
 singularities → results in DIR (default ``out_<geometry stem>``):
 
 * ``summary.json`` — energies, iterations, TAO's converged reason, mesh size and
@@ -41,11 +41,11 @@ from pathlib import Path
 
 from ufl_frames import __version__
 from ufl_frames.bootstrap import init_petsc, options_scope, petsc_initialised
+from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
 
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.geometry.load
 DEFAULT_MAX_IT = 500
-DEFAULT_MAX_ASPECT = 4.0
 
 
 class UsageError(Exception):
@@ -289,8 +289,8 @@ def run_solve(
     from petsc4py import PETSc
 
     from ufl_frames import geometry as geometry_module
-    from ufl_frames import io, solver
-    from ufl_frames.pipeline import FrameField, aspect_bound
+    from ufl_frames import io, solvers
+    from ufl_frames.pipeline import FrameField
 
     comm = MPI.COMM_WORLD if comm is None else comm
     say = _printer(comm, quiet)
@@ -320,7 +320,7 @@ def run_solve(
                 f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}"
             ),
         )
-        tao_type = PETSc.Options().getString("tao_type", solver.DEFAULT_OPTIONS["tao_type"])
+        tao_type = PETSc.Options().getString("tao_type", solvers.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
         say(f"solving ({kind}, TAO {tao_type}) ...")
         result = field.solve(
@@ -338,7 +338,7 @@ def run_solve(
         print(f"{PROG}: warning: TAO stopped with {result.converged_reason}", file=sys.stderr)
 
     say(f"singularities: {io.describe_singularities(field.singularities)}")
-    index_check = field.index_theorem()
+    index_check = field.index_theorem()  # also in the summary
     if not index_check["agrees"] and not quiet and comm.rank == 0:
         print(f"{PROG}: warning: the singularities' indices sum to {index_check['index_sum']:g}, "
               f"Poincaré–Hopf says {index_check['expected']:g} (Euler characteristic "
@@ -350,34 +350,20 @@ def run_solve(
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
     files = field.write(out, label=Path(geometry).stem, tao_type=tao_type) + ["summary.json"]
+    record = field.summary()
     summary = {
         "ufl_frames_version": __version__,
         "geometry": geometry,
-        "isotropic": bool(isotropic),
-        "max_aspect": aspect_bound(isotropic, max_aspect),
-        "pinned_singularities": not free_singularities,
-        "mesh_size": domain.mesh_size,
-        "requested_mesh_size": domain.requested_mesh_size,
+        **{key: record.pop(key) for key in ("isotropic", "max_aspect", "pinned_singularities",
+                                            "mesh_size", "requested_mesh_size")},
         "size_factor": float(size_factor),
         "loader_notes": list(domain.notes),
         "max_it": int(max_it),
         "num_processes": comm.size,
-        "num_vertices": int(domain.num_vertices),
-        "num_cells": int(domain.num_cells),
         "tao_type": tao_type,
         "petsc_options": user_options,
-        "converged_reason": result.converged_reason,
-        "converged": converged,
-        "iterations": int(result.iterations),
-        "H_initial": result.H_initial,
-        "H_final": result.H_final,
-        "E_initial": result.history[0]["E"],
-        "E_final": result.E_final,
-        "wall_time_s": result.wall_time_s,
+        **record,
         "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
-        "singularities": field.singularities,
-        "poincare_hopf": index_check,
-        "history": result.history,
         "files": files,
     }
     io.write_summary(out / "summary.json", summary, comm=comm)

@@ -33,7 +33,8 @@ import numpy as np  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import energy, odeco  # noqa: E402
+from ufl_frames.fem import energy, scales  # noqa: E402
+from ufl_frames.frames2d import odeco  # noqa: E402
 
 __all__ = [
     "describe_singularities",
@@ -106,7 +107,7 @@ def write_summary(path, data: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
 def _frames(rows: np.ndarray):
     """Lengths (N, 2), branch vectors u, v (each (N, 2)) of the rows; zeros for zero rows.
 
-    The branch labels follow :func:`ufl_frames.odeco.q_to_frames` (angle of u in
+    The branch labels follow :func:`ufl_frames.frames2d.odeco.q_to_frames` (angle of u in
     (−π/4, π/4]): the frame is continuous, the labels u/v are not.
     """
     rows = np.asarray(rows, dtype=np.float64)
@@ -304,27 +305,6 @@ def _boundary_segments(mesh) -> np.ndarray:
     return mesh.geometry.x[nodes][:, :, :2].reshape(-1, 2, 2)
 
 
-def _domain_area(mesh) -> float:
-    """Area of the mesh (collective)."""
-    local = fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh)))
-    return mesh.comm.allreduce(local, op=MPI.SUM)
-
-
-def _bounding_box(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) of the mesh's vertices over all ranks (collective)."""
-    x = mesh.geometry.x[:, :2]
-    lo, hi = np.empty(2), np.empty(2)
-    mesh.comm.Allreduce(x.min(axis=0, initial=np.inf), lo, op=MPI.MIN)
-    mesh.comm.Allreduce(x.max(axis=0, initial=-np.inf), hi, op=MPI.MAX)
-    return lo, hi
-
-
-def _mean_edge_length(mesh) -> float:
-    """h of equilateral triangles with the mesh's area and cell count (collective)."""
-    cells = mesh.topology.index_map(mesh.topology.dim).size_global
-    return math.sqrt(4 * _domain_area(mesh) / (math.sqrt(3) * cells))
-
-
 def grid_points(lo, hi, spacing: float) -> np.ndarray:
     """Points (M, 3) of the square grid of step ``spacing`` centred on the box [lo, hi]."""
     axes = []
@@ -375,14 +355,14 @@ def glyph_samples(
     V = q.function_space
     mesh = V.mesh
     comm = mesh.comm
-    lo, hi = _bounding_box(mesh)
+    lo, hi = scales.bounding_box(mesh)
     if spacing is None:
         if glyphs_across is not None:
             spacing = float((hi - lo).max()) / glyphs_across
         else:
-            spacing = math.sqrt(_domain_area(mesh) / glyphs)
+            spacing = math.sqrt(scales.area(mesh) / glyphs)
     spacing = float(spacing)
-    h = _mean_edge_length(mesh)
+    h = scales.mean_cell_edge(mesh)
     if h >= 0.8 * spacing:
         owned = V.dofmap.index_map.size_local
         points = _gather_rows(comm, V.tabulate_dof_coordinates()[:owned, :2])
@@ -589,7 +569,7 @@ def plot_frames(
     bar gives the lengths; an isotropic field, detected at the vertices unless
     ``isotropic`` is given, is drawn with l1 = l2 = (l1 + l2)/2). The boundary is
     every boundary facet. ``singularities`` (``{"index", "x", "y"}``, e.g. from
-    :func:`ufl_frames.singularities.locate_singularities`) are marked, smaller the
+    :func:`ufl_frames.frames2d.singularities.locate_singularities`) are marked, smaller the
     more there are. Figure size: :func:`frame_layout`.
     """
     mesh = q.function_space.mesh
@@ -597,8 +577,8 @@ def plot_frames(
     singularities = singularities or []
     if isotropic is None:
         isotropic = _is_isotropic(q)
-    lo, hi = _bounding_box(mesh)
-    area = _domain_area(mesh)
+    lo, hi = scales.bounding_box(mesh)
+    area = scales.area(mesh)
     layout = frame_layout(lo, hi, title, legend=bool(singularities))
     if glyphs_across is None:
         spacing = max(math.sqrt(area / glyphs), GLYPH_MIN_SPACING_IN / layout.scale)
@@ -690,7 +670,7 @@ def plot_convergence(
 ) -> None:
     """H(q) (log scale) and E(q) against the iteration (note Fig. 2), written by rank 0.
 
-    ``history`` is :attr:`ufl_frames.solver.SolveResult.history` (entries with
+    ``history`` is :attr:`ufl_frames.solvers.SolveResult.history` (entries with
     ``"it"``, ``"H"``, ``"E"``). Collective over ``comm``.
     """
     if comm.rank == 0:

@@ -25,18 +25,15 @@ init_petsc()
 import dolfinx.fem as fem  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ufl_frames import energy, io, mbo, projection, singularities, solver  # noqa: E402
+from ufl_frames import io, solvers  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
+from ufl_frames.frames2d import singularities  # noqa: E402
+from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT, aspect_bound  # noqa: E402
 from ufl_frames.geometry import Domain  # noqa: E402
+from ufl_frames.solvers import mbo  # noqa: E402
 
-__all__ = ["FrameField", "aspect_bound"]
-
-
-def aspect_bound(isotropic: bool, max_aspect: float | None) -> float | None:
-    """The bound l_max/l_min ≤ A the solver gets: None for isotropic frames (l1 = l2
-    already) and for an infinite or missing A."""
-    if isotropic or max_aspect is None or math.isinf(max_aspect):
-        return None
-    return float(max_aspect)
+__all__ = ["FrameField"]
 
 
 @dataclass
@@ -55,48 +52,81 @@ class FrameField:
     isotropic: bool = False
     max_aspect: float | None = None
     boundary_angles: np.ndarray | None = field(default=None, repr=False)
-    constraints: projection.FrameConstraints | None = field(default=None, repr=False)
-    problem: solver.FrameProblem | None = field(default=None, repr=False)
-    result: solver.SolveResult | None = None
+    constraints: FrameConstraints | None = field(default=None, repr=False)
+    problem: solvers.FrameProblem | None = field(default=None, repr=False)
+    result: solvers.SolveResult | None = None
     singularities: list[dict] = field(default_factory=list)
+    #: Whether the last :meth:`solve` held the singular triangles' orientation.
+    pinned_singularities: bool | None = None
 
     @classmethod
     def initial(
         cls,
         domain: Domain,
         isotropic: bool = False,
-        max_aspect: float | None = 4.0,
+        max_aspect: float | None = DEFAULT_MAX_ASPECT,
         monitor=None,
     ) -> "FrameField":
         """The smooth boundary-aligned MBO cross field on ``domain`` (collective).
 
-        ``monitor(level, tau, change)`` as for :func:`ufl_frames.mbo.mbo_frame_field`.
+        ``monitor(level, tau, change)`` as for :func:`ufl_frames.solvers.mbo.mbo_frame_field`.
         """
         V = energy.frame_space(domain.mesh)
         angles = domain.boundary_angles(V)
-        constraints = projection.frame_constraints(V, boundary_angles=angles)
+        constraints = frame_constraints(V, boundary_angles=angles)
         q = mbo.mbo_frame_field(V, constraints=constraints, monitor=monitor)
         return cls(domain=domain, q=q, isotropic=isotropic,
                    max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
                    constraints=constraints, singularities=singularities.locate_singularities(q))
 
     def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
-              options_prefix: str = "") -> solver.SolveResult:
-        """Minimise H from the current field with TAO (:func:`ufl_frames.solver.solve`);
+              options_prefix: str = "") -> solvers.SolveResult:
+        """Minimise H from the current field with TAO (:func:`ufl_frames.solvers.solve`);
         ``q`` holds the result, ``singularities`` are found again (collective)."""
-        self.problem = solver.frame_problem(
+        self.problem = solvers.frame_problem(
             self.q, isotropic=self.isotropic, pin_singularities=pin_singularities,
             max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
             constraints=self.constraints,  # the MBO field's: boundary, normals, masses once
         )
-        self.result = solver.solve(self.problem, max_it=max_it, monitor=monitor,
+        self.result = solvers.solve(self.problem, max_it=max_it, monitor=monitor,
                                    options_prefix=options_prefix)
         self.singularities = singularities.locate_singularities(self.q)
+        self.pinned_singularities = pin_singularities
         return self.result
+
+    def summary(self) -> dict:
+        """The field's record for ``summary.json`` (JSON types; collective): the kind of
+        frames, the mesh, the solve (after :meth:`solve`), singularities, Poincaré–Hopf."""
+        domain, result = self.domain, self.result
+        record = {
+            "isotropic": bool(self.isotropic),
+            "max_aspect": self.max_aspect,
+            "pinned_singularities": self.pinned_singularities,
+            "mesh_size": domain.mesh_size,
+            "requested_mesh_size": domain.requested_mesh_size,
+            "num_vertices": int(domain.num_vertices),
+            "num_cells": int(domain.num_cells),
+        }
+        if result is not None:
+            record.update({
+                "converged_reason": result.converged_reason,
+                "converged": result.converged_reason.startswith("CONVERGED"),
+                "iterations": int(result.iterations),
+                "H_initial": result.H_initial,
+                "H_final": result.H_final,
+                "E_initial": result.history[0]["E"],
+                "E_final": result.E_final,
+                "wall_time_s": result.wall_time_s,
+            })
+        record["singularities"] = self.singularities
+        record["poincare_hopf"] = self.index_theorem()
+        if result is not None:
+            record["history"] = result.history
+        return record
 
     def index_theorem(self) -> dict:
         """The singularities' index sum against Poincaré–Hopf for the domain
-        (:func:`ufl_frames.singularities.index_theorem`), with the corner angles (°)."""
+        (:func:`ufl_frames.frames2d.singularities.index_theorem`), with the corner angles (°)."""
         corners = self.domain.corners
         check = singularities.index_theorem(
             self.singularities, self.domain.euler_characteristic, [c.angle for c in corners]

@@ -1,10 +1,9 @@
-"""Pointwise projections applied to a whole P1 frame field (note §3, steps 2, 4 and 5).
+"""Where a P1 frame field is constrained: boundary and pinned vertices, their directions,
+the lumped masses of all vertices (note §3, "boundary conditions").
 
-The kernels are those of :mod:`ufl_frames.odeco`; this module knows which vertices
-are on the boundary, the boundary orientation there, the lumped-mass weights of the
-vertices, and works on the local rows (owned and ghost) of ``q.x.array``. Every
-operation is pointwise and deterministic, so ghost rows stay equal to their owners'
-without communication; only norms are reduced over MPI.
+:func:`frame_constraints` finds them once per function space (local rows, owned and
+ghost, of ``q.x.array``); :class:`~ufl_frames.fem.manifold.FrameManifold` applies them
+pointwise. Found collectively; afterwards ghost rows agree with their owners.
 
 Boundary orientation. At a boundary vertex one branch is aligned with the normal.
 The normal is averaged in the 4-fold representation, e^{4iψ}, over the adjacent
@@ -24,7 +23,8 @@ import numpy as np  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import odeco  # noqa: E402
+from ufl_frames.frames2d import odeco  # noqa: E402
+from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT, aspect_bound  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,9 @@ class FrameConstraints:
 
     ``boundary`` are local vertex rows (owned and ghost) on the boundary, ``normals``
     their unit normals (nb, 2); ``weights`` the lumped-mass weight of every local
-    row; ``owned`` the number of owned rows; ``isotropic`` whether l1 = l2 everywhere.
+    row; ``owned`` the number of owned rows; ``isotropic`` whether l1 = l2 everywhere;
+    ``max_aspect`` the bound l_max/l_min of non-isotropic frames (None: unbounded; see
+    :mod:`ufl_frames.frames2d.aspect`).
     """
 
     boundary: np.ndarray
@@ -49,6 +51,11 @@ class FrameConstraints:
         mask = np.ones(self.weights.size, dtype=bool)
         mask[self.boundary] = False
         return np.flatnonzero(mask)
+
+    def for_frames(self, isotropic: bool, max_aspect: float | None) -> "FrameConstraints":
+        """The same rows and directions for isotropic or general frames, the aspect bound
+        set by its one rule (:func:`~ufl_frames.frames2d.aspect.aspect_bound`)."""
+        return replace(self, isotropic=isotropic, max_aspect=aspect_bound(isotropic, max_aspect))
 
 
 def _vertex_rows_of_facets(V, facets):
@@ -71,7 +78,7 @@ def _vertex_rows_of_facets(V, facets):
 def frame_constraints(
     V,
     isotropic: bool = False,
-    max_aspect: float | None = None,
+    max_aspect: float | None = DEFAULT_MAX_ASPECT,
     boundary_angles: np.ndarray | None = None,
 ) -> FrameConstraints:
     """Boundary rows, their normals and lumped-mass weights for the frame space ``V``.
@@ -124,7 +131,7 @@ def frame_constraints(
         owned=index_map.size_local,
         isotropic=isotropic,
         comm=mesh.comm,
-        max_aspect=None if isotropic else max_aspect,
+        max_aspect=aspect_bound(isotropic, max_aspect),
     )
 
 
@@ -132,12 +139,12 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray) -> FrameC
     """Constraints that also fix the cross orientation at the vertices of singular triangles.
 
     The vertices of every triangle with a nonzero index (see
-    :mod:`ufl_frames.singularities`) are treated like boundary vertices: orientation
+    :mod:`ufl_frames.frames2d.singularities`) are treated like boundary vertices: orientation
     held at its current value, lengths free. The singularities then stay where the
     initial field put them — the solver can neither move nor annihilate them — which
     is the intended use of the MBO field as a template (note §3, "Initial condition").
     """
-    from ufl_frames.singularities import triangle_indices
+    from ufl_frames.frames2d.singularities import triangle_indices
 
     cells = V.dofmap.list
     x = V.tabulate_dof_coordinates()
@@ -155,56 +162,3 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray) -> FrameC
         boundary=np.concatenate([constraints.boundary, pinned]),
         normals=np.concatenate([constraints.normals, normals]),
     )
-
-
-def project_rows(q: np.ndarray, constraints: FrameConstraints) -> np.ndarray:
-    """Step 4 of note §3: Odeco projection inside, orientation-fixed projection on ∂Ω."""
-    out = np.empty_like(q)
-    interior = constraints.interior
-    iso, aspect = constraints.isotropic, constraints.max_aspect
-    out[interior] = odeco.project(q[interior], isotropic=iso, max_aspect=aspect)
-    b = constraints.boundary
-    out[b] = odeco.project_aligned(q[b], constraints.normals, isotropic=iso, max_aspect=aspect)
-    return out
-
-
-def tangent_basis_rows(
-    q: np.ndarray, constraints: FrameConstraints, gradient: np.ndarray | None = None
-) -> np.ndarray:
-    """Orthonormal tangent basis (N, 5, 3) of the constraint set at q (zero columns: no dof).
-
-    q must satisfy the constraints (be retracted): the frames are read off it directly.
-
-    Interior: 3 dofs (total length e_s, length difference e_d, rotation); isotropic:
-    e_s and rotation. Boundary: orientation fixed, so e_s and e_d (isotropic: e_s).
-    With an aspect bound, frames at the bound that ``gradient`` pushes outwards lose
-    e_d (see :func:`ufl_frames.odeco.tangent_basis`).
-    """
-    basis = odeco.tangent_basis(
-        q, max_aspect=constraints.max_aspect, gradient=gradient, on_variety=True
-    )
-    basis[constraints.boundary, :, 2] = 0.0  # orientation held: no rotation
-    if constraints.isotropic:
-        basis[:, :, 1] = 0.0
-    return basis
-
-
-def tangent_project_rows(q: np.ndarray, dq: np.ndarray, constraints: FrameConstraints):
-    """Step 2 of note §3: the part of ``dq`` tangent to the constraint set at q (on it).
-
-    ``dq`` is a gradient here: it also decides the active aspect bounds.
-    """
-    basis = tangent_basis_rows(q, constraints, gradient=dq)
-    return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
-
-
-def weighted_norm2(q: np.ndarray, constraints: FrameConstraints) -> float:
-    """Σ_v m_v |q_v|² over owned vertices (lumped L² norm squared), summed over ranks."""
-    n = constraints.owned
-    local = float(np.dot(constraints.weights[:n], np.einsum("ni,ni->n", q[:n], q[:n])))
-    return constraints.comm.allreduce(local, op=MPI.SUM)
-
-
-def normalise_rows(q: np.ndarray, constraints: FrameConstraints, norm2: float) -> np.ndarray:
-    """Step 5 of note §3: scale q uniformly so that its lumped L² norm squared is ``norm2``."""
-    return q * np.sqrt(norm2 / weighted_norm2(q, constraints))

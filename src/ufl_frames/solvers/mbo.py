@@ -34,20 +34,9 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from ufl_frames import odeco, projection  # noqa: E402
-
-
-def length_scales(mesh) -> tuple[float, float]:
-    """(diameter of the bounding box, h): h the edge of an equilateral triangle of the
-    mean cell area (collective)."""
-    comm = mesh.comm
-    x = mesh.geometry.x[:, :2]
-    lo = [comm.allreduce(float(v), op=MPI.MIN) for v in x.min(axis=0, initial=np.inf)]
-    hi = [comm.allreduce(float(v), op=MPI.MAX) for v in x.max(axis=0, initial=-np.inf)]
-    diameter = float(np.linalg.norm(np.subtract(hi, lo)))
-    area = comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh))), op=MPI.SUM)
-    cells = mesh.topology.index_map(2).size_global
-    return diameter, math.sqrt(4 * area / (math.sqrt(3) * cells))
+from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
+from ufl_frames.fem.scales import length_scales  # noqa: E402
+from ufl_frames.frames2d import odeco  # noqa: E402
 
 
 def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
@@ -65,7 +54,7 @@ def _unit_isotropic(q: np.ndarray) -> np.ndarray:
 
 def mbo_frame_field(
     V,
-    constraints: projection.FrameConstraints | None = None,
+    constraints: FrameConstraints | None = None,
     sweeps: int = 2,
     levels: int | None = None,
     options_prefix: str = "mbo_",
@@ -78,7 +67,7 @@ def mbo_frame_field(
     """
     mesh = V.mesh
     if constraints is None:
-        constraints = projection.frame_constraints(V)
+        constraints = frame_constraints(V)
     b = constraints.boundary
 
     q = fem.Function(V, name="q")

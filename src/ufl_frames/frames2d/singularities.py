@@ -1,7 +1,7 @@
 r"""Singularities of a cross field given by Odeco coefficients at the vertices of triangles.
 
 The cross direction is read from :math:`C = q_3 + i q_4 = (s/8) e^{4it}` (see
-:mod:`ufl_frames.odeco`): :math:`\theta_4 = \arg C = 4t`, which is continuous across
+:mod:`ufl_frames.frames2d.odeco`): :math:`\theta_4 = \arg C = 4t`, which is continuous across
 the fourfold symmetry of a cross. The index of a triangle is the winding of
 :math:`\theta_4` around its boundary divided by 4:
 
@@ -19,7 +19,7 @@ when called.
 
 import numpy as np
 
-from ufl_frames.odeco import NUM_COEFFICIENTS
+from ufl_frames.frames2d.odeco import NUM_COEFFICIENTS
 
 __all__ = [
     "find_singularities",

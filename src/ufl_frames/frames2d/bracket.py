@@ -4,7 +4,7 @@ r"""The Lie bracket of a 2D frame field in terms of its Odeco coefficients (note
 
 for the scaled branches u = l1 û, v = l2 v̂ with v̂ = û rotated by +90°. The tensor
 C is derived symbolically by ``scripts/derive_bracket.py`` and stored, entry by
-entry, in :mod:`ufl_frames._bracket_table`.
+entry, in :mod:`ufl_frames.frames2d._bracket_table`.
 
 Which C. The defining equations leave a 12-dimensional family (the derivatives of
 the three variety equations, q^T A_m ∂_k q, for 2 components × 2 directions). We
@@ -16,12 +16,12 @@ null-space element of half the norm of C raised the residual discrete H in 7 of 
 trials, but a null-space element fitted to those fields lowered it by 1.6–7x — the
 minimum-norm C is canonical, not optimal; choosing C for accuracy is open.
 
-Pure NumPy; the UFL form of the same formula is :func:`ufl_frames.energy.lie_bracket`.
+Pure NumPy; the UFL form of the same formula is :func:`ufl_frames.fem.energy.lie_bracket`.
 """
 
 import numpy as np
 
-from ufl_frames._bracket_table import BRACKET_ENTRIES, NULLITY
+from ufl_frames.frames2d._bracket_table import BRACKET_ENTRIES, NULLITY
 
 __all__ = ["BRACKET_ENTRIES", "BRACKET_TENSOR", "NULLITY", "lie_bracket", "lie_bracket_direct"]
 

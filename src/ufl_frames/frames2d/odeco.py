@@ -40,6 +40,10 @@ No DOLFINx here: every function takes and returns NumPy arrays of shape (N, 5).
 
 import numpy as np
 
+from ufl_frames.frames2d.aspect import ED_NORM2 as _ED_NORM2
+from ufl_frames.frames2d.aspect import ES_NORM2 as _ES_NORM2
+from ufl_frames.frames2d.aspect import active_bound, clamp_aspect
+
 SQRT2 = np.sqrt(2.0)
 
 #: Coefficients per frame: the 5 circular harmonics of a 2D fourth-order tensor (3D frames,
@@ -57,8 +61,6 @@ for (i, j), c in {(0, 1): 1.0, (1, 3): -3 * SQRT2, (2, 4): -3 * SQRT2}.items():
 for (i, j), c in {(0, 2): 1.0, (1, 4): -3 * SQRT2, (2, 3): 3 * SQRT2}.items():
     VARIETY_MATRICES[2, i, j] = VARIETY_MATRICES[2, j, i] = c / 2
 
-_ES_NORM2 = 19.0 / 64.0  # |e_s(t)|², independent of t
-_ED_NORM2 = 1.0 / 4.0  # |e_d(t)|²
 _NEWTON_ITERATIONS = 5
 _MAX_ROUNDS = 40  # of _NEWTON_ITERATIONS, in the slow path
 # A Newton step below this leaves an angle error of order step² (f is concave there).
@@ -240,26 +242,13 @@ def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False):
     e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
     dq_dt = np.stack([zero, -d * s2, d * c2, -s * s4 / 2, s * c4 / 2], axis=1)
     if max_aspect is not None:
-        kappa = _aspect_kappa(max_aspect)
-        sign = np.where(d < 0, -1.0, 1.0)
-        at_bound = np.abs(d) >= kappa * s * (1 - 1e-9)
-        active = (at_bound & _descent_leaves_bound(gradient, e_s, e_d, sign, kappa))[:, None]
+        active, sign, kappa = active_bound(s, d, gradient, e_s, e_d, max_aspect)
+        active = active[:, None]
         e_s = np.where(active, e_s + (sign * kappa)[:, None] * e_d, e_s)
         e_d = np.where(active, 0.0, e_d)
     basis = np.stack([e_s, e_d, dq_dt], axis=2)
     norm = np.linalg.norm(basis, axis=1, keepdims=True)
     return basis / np.where(norm > 0, norm, 1.0)
-
-
-def _descent_leaves_bound(gradient, e_s, e_d, sign, kappa) -> np.ndarray:
-    """Whether the steepest descent −g of frames at the bound |d| = κ s points outside it.
-
-    Along −g, Δs = −g·e_s/|e_s|² and Δd = −g·e_d/|e_d|²; the bound sign·d − κ s ≤ 0
-    is violated to first order when sign·Δd − κ Δs > 0 (e_s, e_d unnormalised).
-    """
-    ds = -np.einsum("ni,ni->n", gradient, e_s) / _ES_NORM2
-    dd = -np.einsum("ni,ni->n", gradient, e_d) / _ED_NORM2
-    return sign * dd - kappa * ds >= 0
 
 
 def tangent_curvature(
@@ -291,10 +280,7 @@ def tangent_curvature(
     mixed_s, keep_d = e_s1, ~np.full(s.shape, isotropic)
     col0 = e_s
     if max_aspect is not None and not isotropic:
-        kappa = _aspect_kappa(max_aspect)
-        sign = np.where(d < 0, -1.0, 1.0)
-        at_bound = np.abs(d) >= kappa * s * (1 - 1e-9)
-        active = at_bound & _descent_leaves_bound(active_gradient, e_s, e_d, sign, kappa)
+        active, sign, kappa = active_bound(s, d, active_gradient, e_s, e_d, max_aspect)
         col0 = np.where(active[:, None], e_s + (sign * kappa)[:, None] * e_d, e_s)
         mixed_s = np.where(active[:, None], e_s1 + (sign * kappa)[:, None] * e_d1, e_s1)
         keep_d &= ~active
@@ -308,32 +294,6 @@ def tangent_curvature(
     curvature[:, 1, 2] = curvature[:, 2, 1] = cross
     curvature[:, 2, 2] = dot(gradient, s[:, None] * e_s2 + d[:, None] * e_d2) / n2**2
     return curvature
-
-
-def _aspect_kappa(max_aspect: float) -> float:
-    if not (np.isfinite(max_aspect) and max_aspect >= 1):
-        raise ValueError(f"max_aspect must be a finite number >= 1, got {max_aspect}")
-    return (max_aspect - 1) / (max_aspect + 1)
-
-
-def clamp_aspect(s, d, max_aspect: float):
-    """Least-squares (s, d) with l_max/l_min ≤ ``max_aspect``, i.e. |d| ≤ κ s, κ = (A−1)/(A+1).
-
-    For a fixed angle the frames are s e_s + d e_d with |e_s|² = 19/64, |e_d|² = 1/4,
-    so the constrained fit projects (s, d) onto the ray d = ±κ s in that metric.
-    Frames inside the bound are returned unchanged. Without the bound the
-    non-isotropic energy has degenerate minimisers: one branch collapses (l → 0, or
-    negative), which makes the bracket vanish trivially.
-    """
-    kappa = _aspect_kappa(max_aspect)
-    s = np.asarray(s, dtype=np.float64)
-    d = np.asarray(d, dtype=np.float64)
-    sign = np.where(d < 0, -1.0, 1.0)
-    outside = np.abs(d) > kappa * s
-    s_ray = (_ES_NORM2 * s + _ED_NORM2 * kappa * sign * d) / (_ES_NORM2 + _ED_NORM2 * kappa**2)
-    # A fit with s ≤ 0 (an inverted frame, only at wild trial points) stays a tiny frame.
-    s_ray = np.maximum(s_ray, 1e-8 * (np.abs(s) + np.abs(d)))
-    return np.where(outside, s_ray, s), np.where(outside, sign * kappa * s_ray, d)
 
 
 # --- projections ----------------------------------------------------------------

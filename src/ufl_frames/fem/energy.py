@@ -1,6 +1,6 @@
 r"""UFL forms of the integrability and Dirichlet energies on P1 frame fields (note §3).
 
-The frame field is q ∈ [P1]⁵: the Odeco coefficients (see :mod:`ufl_frames.odeco`) at
+The frame field is q ∈ [P1]⁵: the Odeco coefficients (see :mod:`ufl_frames.frames2d.odeco`) at
 the vertices, interpolated linearly in each triangle. With the Lie bracket of eq. (10)
 
 .. math::  [u, v]_i = C_{ijkl}\, q_l\, \partial_k q_j
@@ -24,8 +24,8 @@ import numpy as np  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import odeco  # noqa: E402
-from ufl_frames.bracket import BRACKET_ENTRIES  # noqa: E402
+from ufl_frames.frames2d import odeco  # noqa: E402
+from ufl_frames.frames2d.bracket import BRACKET_ENTRIES  # noqa: E402
 
 
 def frame_space(mesh) -> fem.FunctionSpace:

@@ -1,0 +1,179 @@
+r"""The frame manifold 𝓜 as one object: projection, retraction, tangent spaces, curvature.
+
+In the unknowns x_v = √m_v q_v (m_v the lumped mass of vertex v) the solver works on
+
+    𝓜 = { x : x_v on the Odeco variety (isotropic: l1 = l2) at every vertex v,
+              its orientation fixed at boundary and pinned vertices,
+              l_max/l_min ≤ A (non-isotropic frames, an active set),  |x|² = ρ² }
+
+(note §3). The Euclidean inner product of x is the lumped L² product of q, so step
+sizes and tolerances do not depend on the mesh. The pointwise parts (variety, fixed
+orientation, aspect bound) commute with the scaling — the variety is a cone — so they
+act on q and x alike; only the sphere |x| = ρ couples the vertices.
+
+:class:`FrameManifold` gathers what a Riemannian method needs of 𝓜, in the manner of
+pymanopt's manifolds:
+
+* :meth:`~FrameManifold.project` and :meth:`~FrameManifold.retract`: steps 4 and 4–5 of
+  the note's loop (pointwise closest frame, then the uniform normalisation);
+* :meth:`~FrameManifold.tangent_basis`: per vertex an orthonormal basis (5 × 3, zero
+  columns where a direction is absent) of the pointwise tangent space;
+* :meth:`~FrameManifold.tangent_project` (step 2) and
+  :meth:`~FrameManifold.riemannian_gradient` (step 2 and the sphere's tangent);
+* :meth:`~FrameManifold.curvature_blocks` and :meth:`~FrameManifold.sphere_curvature`:
+  the second-order terms that turn a Euclidean Hessian into the Riemannian one;
+* :meth:`~FrameManifold.inner` and :meth:`~FrameManifold.norm2`: the metric, reduced over
+  MPI ranks.
+
+Arrays are the local rows (owned and ghost, shape (N, 5)) of a P1 frame field; every
+pointwise operation is deterministic, so ghost rows stay equal to their owners' without
+communication. Only NumPy and MPI reductions: no DOLFINx object is touched here.
+"""
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from mpi4py import MPI
+
+from ufl_frames.fem.constraints import FrameConstraints
+from ufl_frames.frames2d import odeco
+
+__all__ = ["FrameManifold"]
+
+
+@dataclass(frozen=True)
+class FrameManifold:
+    """𝓜 for the ``constraints`` of a frame space, on the sphere |x|² = ``radius2``.
+
+    ``radius2`` = ρ² = Σ_v m_v |q_v|² over the owned vertices (None: the cone of frames
+    only, for :meth:`project` and the tangent spaces; :meth:`retract` needs ρ).
+    """
+
+    constraints: FrameConstraints
+    radius2: float | None = None
+
+    # --- the embedding: x = √m q --------------------------------------------------
+
+    @cached_property
+    def sqrt_mass(self) -> np.ndarray:
+        """√m_v for every local row."""
+        return np.sqrt(self.constraints.weights)
+
+    @property
+    def owned(self) -> int:
+        return self.constraints.owned
+
+    def to_x(self, rows: np.ndarray) -> np.ndarray:
+        """x = √m q for the owned rows (the unknowns the solver sees)."""
+        n = self.owned
+        return rows[:n] * self.sqrt_mass[:n, None]
+
+    def from_x(self, x_rows: np.ndarray) -> np.ndarray:
+        """q = x / √m for the owned rows."""
+        n = x_rows.shape[0]
+        return x_rows / self.sqrt_mass[:n, None]
+
+    # --- metric --------------------------------------------------------------------
+
+    def inner(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Σ a·b over the owned rows of two arrays in x, summed over ranks."""
+        n = self.owned
+        return self.constraints.comm.allreduce(float(np.vdot(a[:n], b[:n])), op=MPI.SUM)
+
+    def norm2(self, rows: np.ndarray) -> float:
+        """|x|² = Σ_v m_v |q_v|² of the field ``rows`` (q), the lumped L² norm squared."""
+        n = self.owned
+        local = float(np.dot(self.constraints.weights[:n],
+                             np.einsum("ni,ni->n", rows[:n], rows[:n])))
+        return self.constraints.comm.allreduce(local, op=MPI.SUM)
+
+    # --- points: projection and retraction --------------------------------------------
+
+    def project(self, rows: np.ndarray) -> np.ndarray:
+        """Step 4 of note §3: the closest frame at every vertex, with its orientation fixed
+        at boundary and pinned vertices and the aspect bound applied (pointwise)."""
+        c = self.constraints
+        out = np.empty_like(rows)
+        interior, fixed = c.interior, c.boundary
+        out[interior] = odeco.project(rows[interior], isotropic=c.isotropic,
+                                      max_aspect=c.max_aspect)
+        out[fixed] = odeco.project_aligned(rows[fixed], c.normals, isotropic=c.isotropic,
+                                           max_aspect=c.max_aspect)
+        return out
+
+    def normalise(self, rows: np.ndarray) -> np.ndarray:
+        """Step 5 of note §3: ``rows`` scaled uniformly onto the sphere |x|² = ρ²."""
+        if self.radius2 is None:
+            raise ValueError("this FrameManifold has no sphere (radius2 is None)")
+        return rows * np.sqrt(self.radius2 / self.norm2(rows))
+
+    def retract(self, rows: np.ndarray) -> np.ndarray:
+        """R: steps 4–5 of note §3, the point of 𝓜 that the note's loop takes ``rows`` to."""
+        return self.normalise(self.project(rows))
+
+    # --- tangent spaces ----------------------------------------------------------------
+
+    def tangent_basis(self, rows: np.ndarray, gradient: np.ndarray | None = None) -> np.ndarray:
+        """Orthonormal basis (N, 5, 3) of the pointwise tangent space at ``rows`` (on 𝓜).
+
+        Columns e_s (total length), e_d (length difference), rotation; zero where the
+        direction is absent: rotation at fixed-orientation vertices, e_d for isotropic
+        frames and for frames on the aspect bound that ``gradient`` pushes outwards
+        (see :func:`ufl_frames.frames2d.aspect.active_bound`). Same in q and in x.
+        """
+        c = self.constraints
+        basis = odeco.tangent_basis(rows, max_aspect=c.max_aspect, gradient=gradient,
+                                    on_variety=True)
+        basis[c.boundary, :, 2] = 0.0  # orientation held: no rotation
+        if c.isotropic:
+            basis[:, :, 1] = 0.0
+        return basis
+
+    def tangent_project(self, rows: np.ndarray, dq: np.ndarray,
+                        gradient: np.ndarray | None = None) -> np.ndarray:
+        """Step 2 of note §3: the pointwise tangent part of ``dq`` at ``rows``; the active
+        aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)."""
+        basis = self.tangent_basis(rows, dq if gradient is None else gradient)
+        return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
+
+    def riemannian_gradient(self, rows: np.ndarray, gradient_x: np.ndarray) -> np.ndarray:
+        """grad f on 𝓜 at ``rows`` from the Euclidean gradient ``gradient_x`` = ∂f/∂x (local
+        rows): pointwise tangent part, then the component along x removed (the sphere's
+        tangent). Owned rows, in x."""
+        n = self.owned
+        tangent = self.tangent_project(rows, gradient_x)[:n]
+        x = self.to_x(rows)
+        return tangent - (self.inner(tangent, x) / self.inner(x, x)) * x
+
+    # --- curvature ---------------------------------------------------------------------
+
+    def curvature_blocks(self, rows: np.ndarray, basis: np.ndarray,
+                         gradient_x: np.ndarray) -> np.ndarray:
+        """Per owned vertex the 5 × 5 block B W Bᵀ / m: the pointwise part of the Weingarten
+        map, which the Riemannian Hessian adds to the Euclidean one (in x).
+
+        W (:func:`~ufl_frames.frames2d.odeco.tangent_curvature`) pairs the second
+        fundamental form of the variety with the normal part of the Euclidean gradient
+        in q (``gradient_x`` · √m); zero where the orientation is fixed (the chart is
+        linear there). ``basis``: :meth:`tangent_basis` at ``rows`` with ``gradient_x``.
+        The sphere's part is :meth:`sphere_curvature`.
+        """
+        c, n = self.constraints, self.owned
+        gradient_q = gradient_x * self.sqrt_mass[:, None]
+        # Only the normal part pairs with the second fundamental form; the tangent part is
+        # the sphere's (radial) at a critical point, counted in sphere_curvature.
+        normal = gradient_q - np.einsum("nia,na->ni", basis,
+                                        np.einsum("nia,ni->na", basis, gradient_q))
+        curvature = odeco.tangent_curvature(rows, normal, c.max_aspect, c.isotropic,
+                                            active_gradient=gradient_x)
+        curvature[c.boundary] = 0.0
+        blocks = np.einsum("nia,nab,njb->nij", basis, curvature, basis)[:n]
+        return blocks / c.weights[:n, None, None]
+
+    def sphere_curvature(self, energy: float) -> float:
+        """The sphere's part of the Hessian of a quartic f at x ∈ 𝓜: −(x·∇f)/ρ² = −4f/ρ²
+        (Euler: x·∇f = 4f) on the sphere's tangent space; returned as the positive 4f/ρ²."""
+        if self.radius2 is None:
+            raise ValueError("this FrameManifold has no sphere (radius2 is None)")
+        return 4.0 * energy / self.radius2

@@ -1,0 +1,236 @@
+r"""The integrability energy on the frame manifold: what a solver evaluates (note §3).
+
+A :class:`FrameProblem` holds a P1 frame field ``q``, its compiled UFL forms (H, dH/dq,
+the Dirichlet energy) and the manifold 𝓜 of :mod:`ufl_frames.fem.manifold`, and
+evaluates at the point ``q = R(x/√m)`` of an iterate x:
+
+* H(q), assembled by DOLFINx from the UFL form;
+* the Riemannian gradient in x (the note's steps 1–2 and the sphere's tangent).
+
+What a step needs is passed explicitly: :meth:`FrameProblem.evaluation` returns the
+energy and Euclidean gradient at the current ``q`` as an :class:`Evaluation`, cached on
+the version of ``q`` while a solver tracks it (:meth:`FrameProblem.tracking`), so that
+TAO's callbacks at one iterate (gradient, update, monitor, Hessian) share one retraction
+and one assembly instead of relying on whichever was evaluated last.
+"""
+
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import dolfinx  # noqa: E402
+import dolfinx.fem as fem  # noqa: E402
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
+
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
+from ufl_frames.fem.constraints import pin_singularities as _pin_singular_vertices  # noqa: E402
+from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
+from ufl_frames.frames2d import odeco  # noqa: E402
+from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT  # noqa: E402
+
+__all__ = ["Evaluation", "FrameProblem", "frame_problem"]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """H and its Euclidean gradient ∂H/∂x (local rows, (N, 5); ghost rows are partial
+    sums, meaningful only pointwise) at one version of ``q``."""
+
+    energy: float
+    gradient_x: np.ndarray = field(repr=False)
+
+
+@dataclass
+class FrameProblem:
+    """A frame field ``q``, its compiled energies and the manifold it is kept on."""
+
+    q: fem.Function
+    manifold: FrameManifold
+    integrability: fem.Form
+    gradient: fem.Form
+    dirichlet: fem.Form
+    #: The domain's area, Σ_v m_v.
+    area: float
+    #: Counts the changes of q made here (retractions); keys the cached evaluation.
+    _version: int = field(default=0, repr=False)
+    _evaluated: tuple | None = field(default=None, repr=False)  # (version, Evaluation)
+    #: During a solve: the (vector, PETSc state) that q is R of, and the tracking flag.
+    _synced: tuple | None = field(default=None, repr=False)
+    _tracking: bool = field(default=False, repr=False)
+
+    @property
+    def constraints(self) -> FrameConstraints:
+        return self.manifold.constraints
+
+    @property
+    def norm2(self) -> float:
+        """ρ² = Σ_v m_v |q_v|², kept by the retraction."""
+        return self.manifold.radius2
+
+    @property
+    def sqrt_mass(self) -> np.ndarray:
+        return self.manifold.sqrt_mass
+
+    @property
+    def rows(self) -> np.ndarray:
+        """Local rows (owned and ghost) of q, a (N, 5) view."""
+        return self.q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
+
+    @property
+    def owned(self) -> int:
+        return self.constraints.owned
+
+    @property
+    def energy_scale(self) -> float:
+        """H_s = (ρ²/A)², ρ² = Σ m_v |q_v|², A the area: H of a field turning by O(1) across
+        the domain, up to an O(1) factor (MBO's on the annulus: H = 1.4 H_s).
+
+        Homogeneous of degree 4 in q like H, and, like H, independent of the mesh and of
+        the domain's size (x → s x: ρ² and A scale by s², H is invariant).
+        """
+        return (self.norm2 / self.area) ** 2
+
+    @property
+    def gradient_scale(self) -> float:
+        """G = H_s / ρ: the scale of the Riemannian gradient norm |g| in the unknowns x.
+
+        |g| ρ bounds the first-order change of H under a relative change 1 of the field
+        (x·∇H = 4H), so |g| / G, like H / H_s, is free of the mesh and of the domain's
+        size (|g| scales by 1/s under x → s x, as G does). MBO on the annulus: |g| ≈ 25-35 G.
+        """
+        return self.energy_scale / np.sqrt(self.norm2)
+
+    # --- q and the iterate x --------------------------------------------------------
+
+    @contextmanager
+    def tracking(self):
+        """Within it, :meth:`set_from_x` skips the retraction when x is the vector, in the
+        same PETSc state, that q was last set from or written to (TAO changes x only
+        through PETSc, which counts every change), and :meth:`evaluation` reuses its
+        assembly while q is unchanged. Only for code that changes q through
+        :meth:`set_from_x` and :meth:`retract` alone, such as the TAO callbacks."""
+        self._tracking, self._synced, self._evaluated = True, None, None
+        try:
+            yield self
+        finally:
+            self._tracking, self._synced, self._evaluated = False, None, None
+
+    def _mark_synced(self, x: PETSc.Vec) -> None:
+        if self._tracking:
+            self._synced = (x.handle, x.stateGet())
+
+    def set_from_x(self, x: PETSc.Vec) -> None:
+        """q ← R(x / √m): unscale, fill ghosts, retract (steps 4–5)."""
+        if self._tracking and self._synced == (x.handle, x.stateGet()):
+            return  # q is R(x) already
+        n = self.owned
+        self.rows[:n] = self.manifold.from_x(
+            x.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS))
+        self.q.x.scatter_forward()
+        self.retract()
+        self._mark_synced(x)
+
+    def retract(self) -> None:
+        """q ← R(q): steps 4–5 of note §3 in place."""
+        self.rows[:] = self.manifold.retract(self.rows)
+        self._version += 1
+        self._synced = None
+
+    def write_x(self, x: PETSc.Vec) -> None:
+        """x ← √m q (owned rows)."""
+        x.getArray()[:] = self.manifold.to_x(self.rows).ravel()
+        self._mark_synced(x)
+
+    # --- energies and gradients ------------------------------------------------------
+
+    def energy(self) -> float:
+        """H(q), assembled."""
+        return self.q.function_space.mesh.comm.allreduce(
+            fem.assemble_scalar(self.integrability), op=MPI.SUM
+        )
+
+    def dirichlet_energy(self) -> float:
+        """E(q) = ½∫|∇q|², assembled."""
+        return self.q.function_space.mesh.comm.allreduce(
+            fem.assemble_scalar(self.dirichlet), op=MPI.SUM
+        )
+
+    def evaluation(self) -> Evaluation:
+        """H and ∂H/∂x at the current q: one vector assembly (cached while tracked).
+
+        H comes free with the gradient: the discrete H is a homogeneous quartic in the
+        coefficients of q, so dH(q)[q] = 4 H(q) (Euler) — no second assembly.
+        """
+        if self._tracking and self._evaluated is not None \
+                and self._evaluated[0] == self._version:
+            return self._evaluated[1]
+        b = fem.assemble_vector(self.gradient)
+        b.scatter_reverse(dolfinx.la.InsertMode.add)
+        owned = odeco.NUM_COEFFICIENTS * self.owned
+        H = self.constraints.comm.allreduce(
+            float(np.dot(b.array[:owned], self.q.x.array[:owned])), op=MPI.SUM) / 4
+        # Ghost rows of b are partial sums: used pointwise (active sets), never summed.
+        gradient_x = b.array.reshape(-1, odeco.NUM_COEFFICIENTS) / self.sqrt_mass[:, None]
+        result = Evaluation(energy=H, gradient_x=gradient_x)
+        if self._tracking:
+            self._evaluated = (self._version, result)
+        return result
+
+    def riemannian_gradient(self, g: PETSc.Vec) -> float:
+        """g ← the gradient of H on 𝓜 at q, in the scaled unknowns x (steps 1–2); returns H."""
+        evaluation = self.evaluation()
+        g.getArray()[:] = self.manifold.riemannian_gradient(
+            self.rows, evaluation.gradient_x).ravel()
+        return evaluation.energy
+
+
+def frame_problem(
+    q: fem.Function,
+    isotropic: bool = False,
+    pin_singularities: bool = True,
+    max_aspect: float | None = DEFAULT_MAX_ASPECT,
+    boundary_angles: np.ndarray | None = None,
+    constraints: FrameConstraints | None = None,
+) -> FrameProblem:
+    """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
+
+    The sphere of 𝓜 is through the projection of ``q`` (step 5 keeps its lumped L²
+    norm). With ``pin_singularities`` the cross orientation is held at the vertices of
+    the singular triangles of ``q`` (see :func:`~ufl_frames.fem.constraints.pin_singularities`).
+    ``max_aspect`` bounds l_max/l_min of non-isotropic frames (``math.inf`` or None: no
+    bound, which the non-isotropic energy answers with degenerate frames; see
+    :mod:`ufl_frames.frames2d.aspect`). ``boundary_angles``: exact boundary cross angles
+    per local row (see :func:`~ufl_frames.fem.constraints.frame_constraints`).
+    ``constraints`` already found for ``q``'s space (e.g. the MBO field's) are reused,
+    with ``isotropic`` and ``max_aspect`` set from here; ``boundary_angles`` is then not
+    needed.
+    """
+    V = q.function_space
+    if constraints is None:
+        constraints = frame_constraints(V, isotropic=isotropic, max_aspect=max_aspect,
+                                        boundary_angles=boundary_angles)
+    else:
+        constraints = constraints.for_frames(isotropic, max_aspect)
+    rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
+    if pin_singularities:
+        constraints = _pin_singular_vertices(V, constraints, rows)
+    projected = FrameManifold(constraints).project(rows)
+    manifold = FrameManifold(constraints, radius2=FrameManifold(constraints).norm2(projected))
+    H = energy.integrability_energy_form(q)
+    problem = FrameProblem(
+        q=q,
+        manifold=manifold,
+        integrability=fem.form(H),
+        gradient=fem.form(energy.gradient_form(H, q)),
+        dirichlet=fem.form(energy.dirichlet_energy_form(q)),
+        area=constraints.comm.allreduce(float(constraints.weights[: constraints.owned].sum()),
+                                        op=MPI.SUM),
+    )
+    q.x.array[:] = projected.ravel()
+    return problem

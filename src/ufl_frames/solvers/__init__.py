@@ -1,0 +1,32 @@
+"""Solvers for frame fields: the MBO initial field (:mod:`~ufl_frames.solvers.mbo`), and
+the minimisation of the integrability energy on 𝓜 with PETSc TAO
+(:mod:`~ufl_frames.solvers.tao`, Newton models in :mod:`~ufl_frames.solvers.hessian`).
+
+The names most used are here: ``solvers.frame_problem(q)``, ``solvers.solve(problem)``.
+"""
+
+from ufl_frames.fem.problem import Evaluation, FrameProblem, frame_problem
+from ufl_frames.solvers.hessian import GaussNewtonModel
+from ufl_frames.solvers.tao import (
+    DEFAULT_OPTIONS,
+    ENERGY_RTOL,
+    SECOND_ORDER_TYPES,
+    TYPE_OPTIONS,
+    SolveResult,
+    converged_reason_name,
+    solve,
+)
+
+__all__ = [
+    "DEFAULT_OPTIONS",
+    "ENERGY_RTOL",
+    "SECOND_ORDER_TYPES",
+    "TYPE_OPTIONS",
+    "Evaluation",
+    "FrameProblem",
+    "GaussNewtonModel",
+    "SolveResult",
+    "converged_reason_name",
+    "frame_problem",
+    "solve",
+]

@@ -1,0 +1,281 @@
+r"""Minimise the integrability energy over frame fields with PETSc TAO (note §3).
+
+The note's loop — (1) gradient step, (2) projection of the step on the tangent
+space, (3) update, (4) Odeco projection (orientation fixed on the boundary),
+(5) uniform normalisation — is a Riemannian gradient descent on the set
+
+    𝓜 = { q : q_v on the Odeco variety (isotropic: l1 = l2) at every vertex v,
+              aligned with the normal at boundary vertices,  Σ_v m_v |q_v|² = const }
+
+with steps 4–5 as the retraction R. Here TAO runs it:
+
+* the unknowns are x_v = √m_v q_v (m_v the lumped mass of vertex v), so the Euclidean
+  inner product TAO uses is the lumped L² product of the field and step sizes and
+  tolerances do not depend on the mesh; the pointwise projection commutes with the
+  scaling (the variety is a cone) and the normalisation becomes |x| = const;
+* the objective at x is H(R(x)), assembled by DOLFINx from the UFL form;
+* the gradient is the Riemannian gradient at R(x): the assembled dH/dq, scaled by
+  1/√m_v, projected pointwise on the tangent space (step 2) and orthogonally to x
+  (the tangent of the normalisation sphere);
+* TAO's update hook retracts the iterate, x ← R(x), at the start of every iteration,
+  so every iterate lies on 𝓜 and its gradient is exact.
+
+TAO supplies the search direction (``-tao_type``), the line search (``-tao_ls_type``)
+and the stopping tests (``-tao_gttol``: relative gradient norm, default 1e-6;
+``-tao_gatol``, ``-tao_fmin``, ``-tao_max_it``). The defaults of the last two are
+relative to the natural scales of H, not absolute (:attr:`FrameProblem.energy_scale`):
+a field that is already integrable, or already stationary, stops at iteration 0
+(``CONVERGED_MINF`` / ``CONVERGED_GATOL``) instead of running ``max_it`` Newton steps
+on round-off. TAO types:
+
+* ``nls`` (default), ``ntr``, ``bnls``, ``bntr``: Newton line search / trust region on
+  the model of :class:`GaussNewtonModel` — the exact Riemannian Hessian for isotropic
+  frames, Gauss–Newton for non-isotropic ones (``-frames_hessian``); the Newton systems
+  are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``, default GAMG);
+* ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
+* ``bncg`` with ``-tao_bncg_type gd`` (set by default for ``bncg``) and an Armijo line
+  search: the note's projected gradient descent. Every option can be given on the command line,
+under ``options_prefix`` (default none): defaults below are set only where the user
+gave no value, and ``setFromOptions`` comes last.
+"""
+
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass
+
+from ufl_frames.bootstrap import init_petsc, petsc_defaults
+
+init_petsc()
+
+import dolfinx.fem.petsc  # noqa: E402, F401
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
+
+from ufl_frames.fem.problem import FrameProblem  # noqa: E402
+from ufl_frames.solvers.hessian import GaussNewtonModel  # noqa: E402
+
+#: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
+#: ``-tao_fmin`` are not here: their defaults depend on the problem (see :func:`solve`).
+DEFAULT_OPTIONS = {
+    "tao_type": "nls",  # Riemannian Gauss–Newton (GaussNewtonModel); the note's method: bncg
+    "tao_grtol": 0.0,
+    "tao_gttol": 1e-6,  # |g| / |g_0|: the relative Riemannian gradient norm
+    "tao_max_funcs": 1_000_000,
+}
+
+#: Default ``-tao_fmin`` relative to :attr:`FrameProblem.energy_scale`: H ≥ 0, so a field
+#: with H below it is integrable (|[u, v]| ≲ 1e-8 of its natural size) and a solve has
+#: nothing left to do. Far above the H that MBO leaves on straight-sided domains (~1e-21:
+#: its KSP tolerance), far below any discretisation error (the annulus at h = 0.1: 1e-3).
+ENERGY_RTOL = 1e-16
+
+#: Defaults that apply to one TAO type only.
+TYPE_OPTIONS = {
+    "bncg": {"tao_bncg_type": "gd", "tao_ls_type": "armijo"},
+    "nls": {"tao_nls_pc_type": "gamg"},
+    "ntr": {"tao_ntr_pc_type": "gamg"},
+    "bnls": {"tao_bnk_pc_type": "gamg"},
+    "bntr": {"tao_bnk_pc_type": "gamg"},
+}
+
+_REASONS = {
+    getattr(PETSc.TAO.ConvergedReason, name): name
+    for name in dir(PETSc.TAO.ConvergedReason)
+    if not name.startswith("_")
+}
+
+
+def converged_reason_name(reason: int) -> str:
+    """TAO's converged reason as text (e.g. ``CONVERGED_GRTOL``)."""
+    return _REASONS.get(reason, str(reason))
+
+
+@dataclass
+
+
+class SolveResult:
+    """Outcome of :func:`solve`.
+
+    ``history`` has one entry per TAO monitor call that found a new iterate: the
+    initial state, then one per accepted step (rejected trust-region steps, which
+    ``ntr`` reports too, are left out). ``iterations`` counts those steps; it can
+    exceed TAO's own count by one (``nls`` and ``bncg`` take a first step that TAO
+    numbers 0 again).
+    """
+
+    history: list[dict]
+    converged_reason: str
+    iterations: int
+    wall_time_s: float
+
+    @property
+    def H_initial(self) -> float:
+        return self.history[0]["H"]
+
+    @property
+    def H_final(self) -> float:
+        return self.history[-1]["H"]
+
+    @property
+    def E_final(self) -> float:
+        return self.history[-1]["E"]
+
+
+#: TAO types that get the Gauss–Newton Hessian of :class:`GaussNewtonModel`.
+SECOND_ORDER_TYPES = {"nls", "ntr", "ntl", "bnls", "bntr", "bntl", "tron"}
+
+
+def solve(
+    problem: FrameProblem,
+    max_it: int | None = None,
+    options_prefix: str = "",
+    defaults: dict | None = None,
+    monitor=None,
+) -> SolveResult:
+    """Minimise H over 𝓜 from ``problem.q`` with TAO; ``problem.q`` holds the result.
+
+    ``max_it`` is a default for ``-tao_max_it`` (the command line wins). ``monitor``
+    receives each history entry ``{"it", "H", "E", "gnorm", "step"}`` (on every rank).
+
+    Two defaults are relative to the scales of ``problem`` (given values are absolute):
+
+    * ``-tao_fmin`` = :data:`ENERGY_RTOL` · H_s: an integrable field (H = 0 up to the
+      accuracy of the initial field) ends with ``CONVERGED_MINF``;
+    * ``-tao_gatol`` = gttol · G: the gradient test is |g| ≤ gttol · max(|g₀|, G), so a
+      start that is already stationary ends with ``CONVERGED_GATOL``. TAO's own gttol
+      test compares with |g₀| only, which, at a stationary start, is round-off: its
+      target (1e-6 of that) is out of reach and the solve ran to ``max_it``. G, not an
+      absolute number, because the gradient norm depends on the domain's size.
+
+    Both are tested by TAO before the first step, for every TAO type (0 iterations).
+    """
+    options = {**DEFAULT_OPTIONS, **(defaults or {})}
+    opts = PETSc.Options(options_prefix)
+    tao_type = opts.getString("tao_type", options["tao_type"])
+    options.update(TYPE_OPTIONS.get(tao_type, {}))
+    if max_it is not None:
+        options["tao_max_it"] = max_it
+    gttol = opts.getReal("tao_gttol", float(options["tao_gttol"]))
+    options.setdefault("tao_gatol", gttol * problem.gradient_scale)
+    options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
+    with petsc_defaults(options_prefix, options):
+        return _solve(problem, tao_type, options_prefix, monitor)
+
+
+def _released(exc: BaseException) -> BaseException:
+    """``exc`` with the locals of this module's frames in its traceback cleared.
+
+    Those are the callbacks TAO called (and what they called here): their arguments are
+    petsc4py's own references to the TAO and its vectors, which would keep them alive as
+    long as the caller keeps the exception, past their ``destroy()``. The frames stay in
+    the traceback (file, line, function); only their variables go. The caller's frames,
+    ``monitor``'s included, keep theirs.
+    """
+    tb = exc.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename == __file__:
+            try:
+                tb.tb_frame.clear()
+            except RuntimeError:  # a frame still running (none here: TAO has returned)
+                pass
+        tb = tb.tb_next
+    return exc
+
+
+def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
+    """TAO from ``problem.q``, with the options already in the database (see :func:`solve`).
+
+    Every PETSc object made here (x, g, the model, the TAO) is destroyed on the way out,
+    whether the solve returns or raises, in the same order on every rank (collective).
+    An exception raised by a callback (``monitor`` included) reaches PETSc as an error that
+    aborts ``TaoSolve``; petsc4py then raises a ``PETSc.Error`` (code 101) in its place, so
+    the callbacks keep the first one and it is that exception the caller sees.
+    """
+    comm = problem.constraints.comm
+    hessian = None
+    if tao_type in SECOND_ORDER_TYPES:
+        opts = PETSc.Options(options_prefix)
+        hessian = opts.getString("frames_hessian",
+                                 "exact" if problem.constraints.isotropic else "gauss_newton")
+        if hessian not in ("exact", "gauss_newton"):
+            raise ValueError(f"-frames_hessian must be 'exact' or 'gauss_newton', got {hessian!r}")
+
+    errors = []  # the first exception raised inside a callback, re-raised after TAO stops
+
+    def guarded(callback):
+        def call(*args):
+            try:
+                return callback(*args)
+            except BaseException as exc:
+                if not errors:
+                    errors.append(exc)
+                raise
+
+        return call
+
+    def objective(tao, x):
+        problem.set_from_x(x)
+        return problem.energy()
+
+    def objective_gradient(tao, x, g):
+        problem.set_from_x(x)
+        return problem.riemannian_gradient(g)
+
+    def update(tao, it):
+        problem.set_from_x(tao.getSolution())
+        problem.write_x(tao.getSolution())
+
+    history = []
+
+    def record(tao):
+        _, f, gnorm, _, step, _ = tao.getSolutionStatus()
+        if history and (f, gnorm) == (history[-1]["H"], history[-1]["gnorm"]):
+            return  # a rejected trust-region step (ntr monitors those too): x did not move
+        problem.set_from_x(tao.getSolution())
+        entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
+                 "gnorm": float(gnorm), "step": float(step)}
+        history.append(entry)
+        if monitor is not None:
+            monitor(entry)
+
+    with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
+        owned.enter_context(problem.tracking())
+        x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
+        owned.callback(x.destroy)
+        problem.retract()
+        problem.write_x(x)
+        g = x.duplicate()
+        owned.callback(g.destroy)
+        model = None
+        if hessian is not None:
+            opts = PETSc.Options(options_prefix)
+            model = owned.enter_context(GaussNewtonModel(
+                problem, x, damping=opts.getReal("frames_gn_damping", 1.0),
+                damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
+                exact=hessian == "exact"))
+        tao = PETSc.TAO().create(comm)
+        owned.callback(tao.destroy)
+        tao.setOptionsPrefix(options_prefix)
+        tao.setSolution(x)
+        tao.setObjectiveGradient(guarded(objective_gradient), g)
+        tao.setObjective(guarded(objective))  # line-search trials need no gradient
+        if model is not None:
+            tao.setHessian(guarded(model.update), model.shell, model.assembled)
+        tao.setUpdate(guarded(update))
+        tao.setMonitor(guarded(record))
+        tao.setFromOptions()
+
+        start = time.perf_counter()
+        try:
+            tao.solve()
+        except PETSc.Error:
+            if not errors:
+                raise
+        if errors:  # outside the except clause: no PETSc.Error chained to it
+            raise _released(errors.pop())
+        wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+        problem.set_from_x(tao.getSolution())
+        reason = converged_reason_name(tao.getConvergedReason())
+    iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
+    return SolveResult(history=history, converged_reason=reason, iterations=iterations,
+                       wall_time_s=wall)
