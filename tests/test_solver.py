@@ -417,3 +417,24 @@ def test_one_retraction_per_vector_state(annulus_mesh, monkeypatch):
     assert with_tracking < 0.7 * len(calls)
     assert tracked.iterations == plain.iterations
     assert tracked.H_final == pytest.approx(plain.H_final, rel=1e-10)
+
+
+def test_krylov_iterations_are_counted(annulus_mesh):
+    """Each Newton step's Krylov iterations are in the history, and a cap on them
+    (``-ksp_max_it``) shows. TAO's first nls step here is a gradient step (0 Krylov
+    iterations); the Newton steps after it use some."""
+    problem = mbo_problem(annulus_mesh, 0.1, isotropic=False)
+    result = solvers.solve(problem, max_it=5, options_prefix="kspcount_")
+    counts = result.krylov_iterations
+    assert counts is not None and len(counts) == result.iterations
+    assert all(c >= 0 for c in counts) and all(c > 0 for c in counts[1:])
+    assert result.history[0]["ksp_its"] == 0
+    problem_lmvm = mbo_problem(annulus_mesh, 0.1, isotropic=False)
+    lmvm = solvers.solve(problem_lmvm, max_it=3, options_prefix="kspcount_lmvm_",
+                         defaults={"tao_type": "lmvm"})
+    assert lmvm.krylov_iterations is None
+    capped_problem = mbo_problem(annulus_mesh, 0.1, isotropic=False)
+    capped = solvers.solve(capped_problem, max_it=5, options_prefix="kspcount_cap_",
+                           defaults={"tao_nls_ksp_max_it": 4})
+    assert max(capped.krylov_iterations) <= 4 * 3  # nls may retry a failed step twice
+    assert max(capped.krylov_iterations) < max(counts)

@@ -328,6 +328,7 @@ def run_solve(
             max_it=max_it,
             monitor=lambda e: say(
                 f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
+                + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else "")
             ),
         )
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins

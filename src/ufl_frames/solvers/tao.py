@@ -100,7 +100,8 @@ class SolveResult:
     initial state, then one per accepted step (rejected trust-region steps, which
     ``ntr`` reports too, are left out). ``iterations`` counts those steps; it can
     exceed TAO's own count by one (``nls`` and ``bncg`` take a first step that TAO
-    numbers 0 again).
+    numbers 0 again). With a Newton model (``nls``, ``ntr``, ...) each entry also has
+    ``ksp_its``: the Krylov iterations spent since the previous entry.
     """
 
     history: list[dict]
@@ -119,6 +120,13 @@ class SolveResult:
     @property
     def E_final(self) -> float:
         return self.history[-1]["E"]
+
+    @property
+    def krylov_iterations(self) -> list[int] | None:
+        """Krylov iterations per accepted step (None without a Newton model)."""
+        if not self.history or "ksp_its" not in self.history[0]:
+            return None
+        return [entry["ksp_its"] for entry in self.history[1:]]
 
 
 #: TAO types that get the Gauss–Newton Hessian of :class:`GaussNewtonModel`.
@@ -226,6 +234,11 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
         problem.write_x(tao.getSolution())
 
     history = []
+    linear_iterations = [0, 0]  # Krylov iterations so far, and at the last history entry
+
+    def count_linear(ksp, it, rnorm):
+        if it > 0:
+            linear_iterations[0] += 1
 
     def record(tao):
         _, f, gnorm, _, step, _ = tao.getSolutionStatus()
@@ -234,6 +247,9 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
         problem.set_from_x(tao.getSolution())
         entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
                  "gnorm": float(gnorm), "step": float(step)}
+        if model is not None:  # Krylov iterations of the Newton step(s) that led here
+            entry["ksp_its"] = linear_iterations[0] - linear_iterations[1]
+            linear_iterations[1] = linear_iterations[0]
         history.append(entry)
         if monitor is not None:
             monitor(entry)
@@ -264,6 +280,8 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
         tao.setUpdate(guarded(update))
         tao.setMonitor(guarded(record))
         tao.setFromOptions()
+        if model is not None:
+            tao.getKSP().setMonitor(count_linear)
 
         start = time.perf_counter()
         try:
