@@ -1,0 +1,292 @@
+"""End-to-end cost of a frame-field run as the mesh is refined: does it scale linearly?
+
+    python benchmarks/scaling.py [--cases piano-noniso piano-iso annulus-noniso annulus-iso]
+                                 [--triangles 1e4 1e5 | --sizes 0.05 0.025]
+                                 [--np 1] [--np-largest 2] [--timeout 900] [--max-it 500]
+                                 [--json benchmarks/out/scaling.json] [PETSc options]
+
+Every (case, size) runs in a fresh process (under ``mpirun -n NP`` when NP > 1), so that its
+peak memory is its own: the whole run as the CLI does it, through
+:class:`ufl_frames.pipeline.FrameField` — Gmsh meshing and distribution (``mesh``), the MBO
+initial field (``mbo``), the TAO solve with the defaults (``solve``), and the ParaView files
+and figures (``write``). Sizes are given as triangle counts (``--triangles``: the mesh size is
+chosen from the measured counts at h = 0.05, N ~ 1/h²: piano 1887, annulus 2305) or as mesh
+sizes (``--sizes``). ``--np-largest`` runs the largest size on that many ranks instead.
+
+Per run it prints: triangles and vertices, ranks, the wall seconds of each stage (max over
+ranks) and their total, Newton iterations, mean and max Krylov iterations per Newton step,
+peak resident memory per rank (max over ranks), the final H, TAO's reason and the
+singularities' indices. Then, per case, the growth per 2x refinement (h → h/2, i.e. ×4
+triangles) between consecutive sizes of: Newton iterations, mean Krylov iterations, solve
+time per triangle; and the issue's targets for the non-isotropic piano, each marked
+``holds`` / ``fails`` / ``not measured``. A run past ``--timeout`` seconds is killed and
+reported as ``timeout`` with the stages it finished.
+
+Unknown single-dash arguments (``-tao_nls_pc_type hypre``) reach every run's PETSc options.
+The solves use the ``ufl_frames`` that the interpreter imports (``PYTHONPATH=OTHER/src``
+measures another checkout). Times are wall-clock on whatever else the machine runs: compare
+runs made side by side.
+"""
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+CASES = ("piano-noniso", "piano-iso", "annulus-noniso", "annulus-iso")
+#: Triangles at h = 0.05 (measured), for --triangles.
+TRIANGLES_AT_005 = {"piano": 1887, "annulus": 2305}
+STAGES = ("mesh", "mbo", "solve", "write")
+GROWTH_LIMIT = 1.3  # per 2x refinement, Newton iterations and mean Krylov iterations
+#: Final H of the non-isotropic piano at h = 0.05 with the defaults before the scaling work:
+#: 1.1225e-3 with the CAD boundary tangents (the default since the real-geometry loader;
+#: 1.0965e-3 with the mesh's edge normals, the figure the issue quotes).
+REFERENCE_H_005 = 1.1225e-3
+
+
+# --- one run (in its own process) -------------------------------------------------------
+
+
+def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str]) -> dict:
+    """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0)."""
+    from ufl_frames.bootstrap import init_petsc
+
+    init_petsc([sys.argv[0], *petsc_argv])
+    import resource
+
+    from mpi4py import MPI
+
+    from ufl_frames import geometry
+    from ufl_frames.pipeline import FrameField
+
+    comm = MPI.COMM_WORLD
+    shape, kind = case.split("-")
+    stages, cpu = {}, {}
+
+    def stage(name, func):
+        comm.Barrier()
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        value = func()
+        cpu[name] = time.process_time() - cpu0
+        stages[name] = comm.allreduce(time.perf_counter() - wall0, op=MPI.MAX)
+        if comm.rank == 0:
+            print(f"  {name}: {stages[name]:.2f} s", file=sys.stderr, flush=True)
+        return value
+
+    domain = stage("mesh", lambda: geometry.build(comm, shape, h))
+    field = stage("mbo", lambda: FrameField.initial(domain, isotropic=kind == "iso"))
+    result = stage("solve", lambda: field.solve(max_it=max_it))
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    comm.Barrier()
+    stage("write", lambda: field.write(out, label=shape))
+    peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)
+    krylov = result.krylov_iterations or []
+    newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
+    return {
+        "case": case, "h": h, "ranks": comm.size,
+        "triangles": int(domain.num_cells), "vertices": int(domain.num_vertices),
+        "mesh_size": domain.mesh_size,
+        "stages": stages, "cpu_rank0": cpu, "total": sum(stages.values()),
+        "iterations": result.iterations, "converged_reason": result.converged_reason,
+        "ksp_mean": sum(newton) / len(newton) if newton else None,
+        "ksp_max": max(newton) if newton else None, "ksp_per_step": krylov,
+        "H_final": result.H_final, "peak_rss_mb": peak_kb / 1024,
+        "singularities": sorted(s["index"] for s in field.singularities),
+    }
+
+
+# --- the driver ---------------------------------------------------------------------------
+
+
+def mesh_size_for(case: str, triangles: float) -> float:
+    shape = case.split("-")[0]
+    return 0.05 * math.sqrt(TRIANGLES_AT_005[shape] / triangles)
+
+
+def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
+    """Run one (case, h) in a fresh process; the record, or its failure."""
+    command = [sys.executable, str(Path(__file__).resolve()), "--one", case, repr(h),
+               "--max-it", str(args.max_it), "--record", str(partial), *petsc_argv]
+    if ranks > 1:
+        mpirun = Path(sys.executable).with_name("mpirun")
+        command = [str(mpirun) if mpirun.exists() else "mpirun", "-n", str(ranks), *command]
+    env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
+    start = time.perf_counter()
+    try:
+        done = subprocess.run(command, env=env, timeout=args.timeout, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    except subprocess.TimeoutExpired:
+        return {"case": case, "h": h, "ranks": ranks, "status": "timeout",
+                "elapsed": time.perf_counter() - start}
+    if done.returncode != 0 or not partial.exists():
+        tail = (done.stderr or "").strip().splitlines()[-3:]
+        return {"case": case, "h": h, "ranks": ranks, "status": f"exit {done.returncode}",
+                "error": " | ".join(tail)}
+    record = json.loads(partial.read_text())
+    record["status"] = "ok"
+    return record
+
+
+def _indices(values) -> str:
+    if not values:
+        return "none"
+    counts = {}
+    for v in values:
+        counts[v] = counts.get(v, 0) + 1
+    return " ".join(f"{v:+g}x{n}" for v, n in sorted(counts.items()))
+
+
+def print_table(records) -> None:
+    head = ("| case | h | triangles | ranks | mesh s | mbo s | solve s | write s | total s "
+            "| Newton its | KSP mean | KSP max | peak MB/rank | final H | reason | singularities |")
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+    for r in records:
+        if r["status"] != "ok":
+            print(f"| {r['case']} | {r['h']:.4g} | - | {r['ranks']} | {r['status']} "
+                  f"{r.get('error', '')} |" + " |" * 11)
+            continue
+        s = r["stages"]
+        mean = "-" if r["ksp_mean"] is None else f"{r['ksp_mean']:.0f}"
+        peak = "-" if r["ksp_max"] is None else str(r["ksp_max"])
+        print(f"| {r['case']} | {r['h']:.4g} | {r['triangles']} | {r['ranks']} "
+              f"| {s['mesh']:.2f} | {s['mbo']:.2f} | {s['solve']:.2f} | {s['write']:.2f} "
+              f"| {r['total']:.1f} | {r['iterations']} | {mean} | {peak} "
+              f"| {r['peak_rss_mb']:.0f} | {r['H_final']:.4e} | {r['converged_reason']} "
+              f"| {_indices(r['singularities'])} |")
+
+
+def growth_factors(records, case) -> list[tuple]:
+    """(a, b, Newton, KSP mean, solve time per triangle) growth per 2x refinement between
+    consecutive finished sizes of ``case``."""
+    done = sorted((r for r in records if r["case"] == case and r["status"] == "ok"),
+                  key=lambda r: r["triangles"])
+    factors = []
+    for a, b in zip(done[:-1], done[1:], strict=True):
+        halvings = 0.5 * math.log2(b["triangles"] / a["triangles"])  # h → h/2: ×4
+        if halvings <= 0:
+            continue
+
+        def per2x(x, y, halvings=halvings):
+            return (y / x) ** (1 / halvings) if x and y else float("nan")
+
+        factors.append((a, b, per2x(a["iterations"], b["iterations"]),
+                        per2x(a["ksp_mean"] or 0, b["ksp_mean"] or 0),
+                        per2x(a["stages"]["solve"] / a["triangles"],
+                              b["stages"]["solve"] / b["triangles"])))
+    return factors
+
+
+def growth(records) -> list[str]:
+    """Per case, growth per 2x refinement between consecutive finished sizes."""
+    lines = []
+    for case in dict.fromkeys(r["case"] for r in records):
+        for a, b, newton, ksp, cost in growth_factors(records, case):
+            lines.append(f"{case}: {a['triangles']} -> {b['triangles']} triangles, per 2x "
+                         f"refinement: Newton its x{newton:.2f}, mean KSP its x{ksp:.2f}, "
+                         f"solve time per triangle x{cost:.2f}")
+    return lines
+
+
+def targets(records) -> list[str]:
+    """The issue's targets for the non-isotropic piano with the defaults."""
+    piano = [r for r in records if r["case"] == "piano-noniso" and r["status"] == "ok"]
+
+    def near(triangles, ranks=None):
+        found = [r for r in piano if 0.5 * triangles <= r["triangles"] <= 2 * triangles
+                 and (ranks is None or r["ranks"] == ranks)]
+        return found[0] if found else None
+
+    def mark(ok):
+        return "holds" if ok else "fails"
+
+    out = []
+    r = next((r for r in piano if abs(r["h"] - 0.025) < 1e-9), None)
+    out.append("h = 0.025 end to end <= 20 s: "
+               + (f"{r['total']:.1f} s, {mark(r['total'] <= 20)}" if r else "not measured"))
+    r = near(1e5, ranks=1)
+    out.append("~1e5 triangles serial <= 60 s: "
+               + (f"{r['total']:.1f} s, {mark(r['total'] <= 60)}" if r else "not measured"))
+    r = near(1e6, ranks=2)
+    out.append("~1e6 triangles on 2 ranks <= 300 s and <= 3 GB/rank: "
+               + (f"{r['total']:.1f} s, {r['peak_rss_mb'] / 1024:.2f} GB, "
+                  f"{mark(r['total'] <= 300 and r['peak_rss_mb'] <= 3072)}"
+                  if r else "not measured"))
+    factors = growth_factors(records, "piano-noniso")
+    if factors:
+        worst = max(max(f[2], f[3]) for f in factors)
+        out.append(f"Newton and mean KSP its grow <= {GROWTH_LIMIT}x per 2x refinement: "
+                   f"worst x{worst:.2f}, {mark(worst <= GROWTH_LIMIT)}")
+    else:
+        out.append("growth per 2x refinement: not measured (fewer than two sizes)")
+    r = next((r for r in piano if abs(r["h"] - 0.05) < 1e-9), None)
+    out.append("final H at h = 0.05 <= 1.0965e-3 (the earlier default's): "
+               + (f"{r['H_final']:.4e}, {mark(r['H_final'] <= 1.0965e-3 * (1 + 1e-3))}"
+                  if r else "not measured"))
+    return out
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", choices=CASES, default=["piano-noniso"])
+    sizes = parser.add_mutually_exclusive_group()
+    sizes.add_argument("--triangles", nargs="+", type=float)
+    sizes.add_argument("--sizes", nargs="+", type=float)
+    parser.add_argument("--np", type=int, default=1, help="ranks per run (default 1)")
+    parser.add_argument("--np-largest", type=int, default=None,
+                        help="ranks for the largest size (default: --np)")
+    parser.add_argument("--timeout", type=float, default=900.0, help="seconds per run")
+    parser.add_argument("--max-it", type=int, default=500)
+    parser.add_argument("--json", type=Path, default=None, help="write all records here")
+    parser.add_argument("--one", nargs=2, metavar=("CASE", "H"), help=argparse.SUPPRESS)
+    parser.add_argument("--record", type=Path, help=argparse.SUPPRESS)
+    return parser.parse_known_args(argv)
+
+
+def main(argv=None) -> int:
+    args, petsc_argv = parse_args(argv)
+    if args.one:
+        with tempfile.TemporaryDirectory() as tmp:
+            record = run_one(args.one[0], float(args.one[1]), args.max_it, Path(tmp) / "out",
+                             petsc_argv)
+        from mpi4py import MPI
+
+        if MPI.COMM_WORLD.rank == 0:
+            args.record.write_text(json.dumps(record))
+        return 0
+    if args.sizes:
+        plan = {case: sorted(args.sizes, reverse=True) for case in args.cases}
+    else:
+        counts = sorted(args.triangles or [1e4, 1e5])
+        plan = {case: [mesh_size_for(case, n) for n in counts] for case in args.cases}
+    records = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case, hs in plan.items():
+            for k, h in enumerate(hs):
+                largest = k == len(hs) - 1
+                ranks = args.np_largest if largest and args.np_largest else args.np
+                print(f"{case} h = {h:.4g} on {ranks} rank(s) ...", file=sys.stderr, flush=True)
+                partial = Path(tmp) / f"{case}-{k}.json"
+                records.append(launch(case, h, ranks, args, petsc_argv, partial))
+                if records[-1]["status"] != "ok":
+                    print(f"  {records[-1]['status']} {records[-1].get('error', '')}",
+                          file=sys.stderr)
+    print_table(records)
+    print()
+    for line in growth(records) + targets(records):
+        print(f"- {line}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(records, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
