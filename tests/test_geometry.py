@@ -77,6 +77,24 @@ def test_piano_area_and_boundary():
     assert np.allclose(x.min(axis=0), [0, 0]) and np.allclose(x.max(axis=0), [2, 1.2])
 
 
+def test_large_meshes_are_refined_coarse_meshes(monkeypatch):
+    """Above REFINE_ABOVE triangles Gmsh meshes at 2^k h and splits k times: about the
+    same count and edge length as meshing at h, the new boundary points on the circles
+    (to rounding; a chord midpoint would be off by h²/8r), and a note says so."""
+    direct = geometry.annulus(COMM, 0.05)
+    monkeypatch.setattr(geometry, "REFINE_ABOVE", 300)
+    refined = geometry.annulus(COMM, 0.05)
+    assert any("refined 2 time(s)" in note for note in refined.notes), refined.notes
+    assert not any("refined" in note for note in direct.notes)
+    assert 0.7 < num_cells(refined) / num_cells(direct) < 1.4
+    assert refined.mesh_size == pytest.approx(direct.mesh_size, rel=0.15)
+    r = np.linalg.norm(refined.mesh.geometry.x[:, :2], axis=1)
+    on_boundary = (np.abs(r - 0.5) < 1e-3) | (np.abs(r - 1.0) < 1e-3)
+    distance = np.minimum(np.abs(r - 0.5), np.abs(r - 1.0))[on_boundary]
+    assert distance.max(initial=0.0) < 1e-12
+    assert integrate(refined, ufl.ds) == pytest.approx(3 * math.pi, rel=2e-3)
+
+
 def test_mesh_size_refines():
     coarse, fine = geometry.piano(COMM, 0.2), geometry.piano(COMM, 0.1)
     assert 3 < num_cells(fine) / num_cells(coarse) < 5

@@ -100,6 +100,10 @@ CURVE_POINTS_PER_TURN = 12
 CURVE_POINTS_PER_CURVE = 8
 #: Largest estimated triangle count meshed without asking (``max_triangles``).
 MAX_TRIANGLES = 4_000_000
+#: Above this estimated triangle count a uniform size h is meshed at 2^k h and refined k
+#: times by Gmsh (every triangle split into 4, new boundary points put on the curves):
+#: 10⁶ piano triangles took 41 s meshed directly, 4 s as 6·10⁴ refined twice.
+REFINE_ABOVE = 150_000
 #: Facet tag of boundary edges that lie on no curve of the file (a bare ``.msh``).
 NO_CURVE = 0
 
@@ -591,6 +595,7 @@ def _mesh_model(sizing: _Sizing, notes: list[str]) -> float | None:
         gmsh.option.setNumber(name, max(gmsh.option.getNumber(name), least))
     own_sizes = sizing.h is None and _file_sets_sizes()
     area = _model_area()
+    refinements = 0
     if own_sizes:
         h = None
         gmsh.option.setNumber(
@@ -608,8 +613,15 @@ def _mesh_model(sizing: _Sizing, notes: list[str]) -> float | None:
                 f"{estimate:.2g} triangles, more than the limit {sizing.max_triangles:.3g}: "
                 "choose a larger mesh size (or raise the limit)"
             )
-        gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+        while estimate / 4**refinements > REFINE_ABOVE:
+            refinements += 1
+        gmsh.option.setNumber("Mesh.MeshSizeMax", h * 2**refinements)
     gmsh.model.mesh.generate(2)
+    if refinements:
+        for _ in range(refinements):
+            gmsh.model.mesh.refine()
+        notes.append(f"meshed at size {h * 2**refinements:.3g} and refined {refinements} "
+                     f"time(s) (each triangle split into 4): faster than meshing at {h:.3g}")
     return h
 
 
