@@ -1,0 +1,300 @@
+r"""From a frame field on a triangle mesh to a combed field on a topological disk.
+
+The parametrisation (U, V) of a frame field with singularities or holes is multivalued:
+it needs a cut. Here, all on global NumPy arrays (pure NumPy/SciPy):
+
+1. :func:`face_frames`: one frame per triangle (angle t, lengths l1, l2) from the P1 field's
+   vertex frames, each matched to the triangle's first vertex modulo 90° (a cross has four
+   labellings: turning the labels by 90° maps (t, l1, l2) to (t + π/2, l2, l1));
+2. :func:`matchings`: for every interior edge the label turn k ∈ Z₄ that best aligns the
+   frame of one triangle with that of its neighbour;
+3. :func:`singular_vertices`: interior vertices around which the turns do not add up to 0
+   modulo 4 — the singularities of the face-based field, at vertices;
+4. :func:`cut_graph`: mesh edges that, cut open, leave a topological disk: shortest paths
+   (Dijkstra on edge lengths) from every inner boundary loop and then from every singular
+   vertex to what is cut already, starting from the outer boundary — a greedy Steiner tree,
+   short by construction;
+5. :func:`comb`: a label turn r_f per triangle along a spanning tree of the cut mesh's dual
+   graph, so that neighbours agree everywhere except across the cut; there the jump
+   j_e = r_g − r_f − k_fg (mod 4) is what the seam's transition rotates by;
+6. :func:`wedges`: the corners of the triangles grouped into the vertices of the cut mesh
+   (a vertex on a cut has one copy per side).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from ufl_frames.frames2d import odeco
+
+__all__ = ["CutMesh", "comb", "cut_graph", "cut_mesh", "face_frames", "matchings",
+           "singular_vertices", "wedges"]
+
+QUARTER = np.pi / 2
+
+
+def _wrap(angle):
+    """Angles into (−π, π]."""
+    return np.pi - np.mod(np.pi - angle, 2 * np.pi)
+
+
+def relabel(angle, l1, l2, k):
+    """The frame (angle, l1, l2) with its labels turned k quarter turns (k may be an array)."""
+    k = np.mod(k, 4)
+    odd = (k % 2) == 1
+    return angle + k * QUARTER, np.where(odd, l2, l1), np.where(odd, l1, l2)
+
+
+def face_frames(cells: np.ndarray, q: np.ndarray):
+    """Per triangle (angle, l1, l2): the vertex frames matched to the first vertex's labels
+    (nearest quarter turn) and averaged (angle by the mean difference, lengths by the mean)."""
+    lengths, angles = odeco.q_to_frames(q)
+    t = angles[cells]  # (m, 3)
+    l1, l2 = lengths[cells, 0], lengths[cells, 1]
+    k = np.rint((t[:, :1] - t) / QUARTER).astype(np.int64)
+    t, l1, l2 = relabel(t, l1, l2, k)
+    angle = t[:, 0] + np.mean(_wrap(t - t[:, :1]), axis=1)
+    return angle, l1.mean(axis=1), l2.mean(axis=1)
+
+
+def interior_edges(cells: np.ndarray):
+    """The edges of the mesh: (edges (E, 2) sorted, faces (E, 2) with −1 for none, local
+    index in each face of the vertex opposite the edge (E, 2))."""
+    m = cells.shape[0]
+    local = np.array([[1, 2], [2, 0], [0, 1]])  # edge opposite vertex i
+    pairs = cells[:, local].reshape(-1, 2)
+    key_pairs = np.sort(pairs, axis=1)
+    n = int(cells.max()) + 1
+    keys = key_pairs[:, 0] * n + key_pairs[:, 1]
+    order = np.argsort(keys, kind="stable")
+    unique, first, counts = np.unique(keys[order], return_index=True, return_counts=True)
+    if np.any(counts > 2):
+        raise ValueError("an edge is shared by more than two triangles")
+    face = np.repeat(np.arange(m), 3)[order]
+    opposite = np.tile(np.arange(3), m)[order]
+    faces = np.full((unique.size, 2), -1, dtype=np.int64)
+    opp = np.full((unique.size, 2), -1, dtype=np.int64)
+    faces[:, 0], opp[:, 0] = face[first], opposite[first]
+    two = counts == 2
+    faces[two, 1], opp[two, 1] = face[first[two] + 1], opposite[first[two] + 1]
+    edges = np.stack([unique // n, unique % n], axis=1)
+    return edges, faces, opp
+
+
+def matchings(angle: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """k_fg ∈ Z₄ per edge (f, g = faces[:, 0], faces[:, 1]): turning g's labels by k_fg
+    brings its frame closest to f's (0 for boundary edges)."""
+    k = np.zeros(faces.shape[0], dtype=np.int64)
+    inner = faces[:, 1] >= 0
+    f, g = faces[inner, 0], faces[inner, 1]
+    k[inner] = np.mod(np.rint((angle[f] - angle[g]) / QUARTER), 4).astype(np.int64)
+    return k
+
+
+def _vertex_fans(cells, edges, faces):
+    """For every vertex, its incident edges (CSR of edge ids)."""
+    n = int(cells.max()) + 1
+    rows = np.concatenate([edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([np.arange(edges.shape[0])] * 2)
+    return sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, edges.shape[0]))
+
+
+def singular_vertices(cells, angle, edges, faces) -> tuple[np.ndarray, np.ndarray]:
+    """Interior vertices whose fan of triangles turns the frame by a nonzero multiple of 90°,
+    and that turn in quarters (the index is −turn/4 … here: the winding of 4t around the
+    vertex divided by 2π, in quarters: the vertex's index times 4)."""
+    n = int(cells.max()) + 1
+    boundary = np.zeros(n, bool)
+    on_boundary = faces[:, 1] < 0
+    boundary[edges[on_boundary].ravel()] = True
+    # Winding of the face angles around each vertex: Σ over the fan's edges of the wrapped
+    # difference (mod 90°) between the two faces, oriented by the edge's direction around
+    # the vertex (counter-clockwise fans: cells are taken counter-clockwise).
+    inner = ~on_boundary
+    f, g = faces[inner, 0], faces[inner, 1]
+    step = np.mod(angle[g] - angle[f] + QUARTER / 2, QUARTER) - QUARTER / 2  # g relative to f
+    winding = np.zeros(n)
+    e = edges[inner]
+    # Going around vertex a counter-clockwise crosses edge (a, b) from the face on its
+    # right to the face on its left. For face f, edge (a, b) is f's edge in cyclic order if
+    # b follows a in f: then f is on the left of a→b.
+    f_cells = cells[f]
+    pos_a = np.argmax(f_cells == e[:, :1], axis=1)
+    b_follows_a = f_cells[np.arange(f.size), (pos_a + 1) % 3] == e[:, 1]
+    # f on the left of a→b: around a (ccw) we go g → f across it; around b the other way.
+    sign_a = np.where(b_follows_a, -1.0, 1.0)
+    np.add.at(winding, e[:, 0], sign_a * step)
+    np.add.at(winding, e[:, 1], -sign_a * step)
+    turns = np.rint(winding / QUARTER).astype(np.int64)
+    singular = np.flatnonzero((turns != 0) & ~boundary)
+    return singular, turns[singular]
+
+
+def _boundary_loops(edges, faces, n):
+    """Vertex sets of the boundary's connected components, the outer (longest) first."""
+    b = edges[faces[:, 1] < 0]
+    graph = sp.csr_matrix((np.ones(b.shape[0]), (b[:, 0], b[:, 1])), shape=(n, n))
+    count, label = csgraph.connected_components(graph, directed=False)
+    on = np.zeros(n, bool)
+    on[b.ravel()] = True
+    loops = [np.flatnonzero((label == c) & on) for c in range(count)]
+    loops = [loop for loop in loops if loop.size]
+    return loops
+
+
+def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
+    """Edge ids (into ``edges``) to cut along, and the number of cut paths.
+
+    Shortest paths over the interior edges: from each inner boundary loop (the loops
+    other than the longest) and then from each singular vertex to the set cut so far,
+    which starts as the longest boundary loop and grows by every path and loop added.
+    """
+    n = x.shape[0]
+    length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
+    inner = faces[:, 1] >= 0
+    ids = np.flatnonzero(inner)
+    graph = sp.csr_matrix((length[ids], (edges[ids, 0], edges[ids, 1])), shape=(n, n))
+    graph = graph + graph.T
+    edge_id = sp.csr_matrix((ids + 1.0, (edges[ids, 0], edges[ids, 1])), shape=(n, n))
+    edge_id = edge_id + edge_id.T
+    loops = _boundary_loops(edges, faces, n)
+    perimeter = [length[np.isin(edges[:, 0], loop) & np.isin(edges[:, 1], loop)
+                        & ~inner].sum() for loop in loops]
+    order = np.argsort(perimeter)[::-1]
+    in_cut = np.zeros(n, bool)
+    in_cut[loops[order[0]]] = True
+    cut, paths = [], 0
+    targets = [loops[i] for i in order[1:]] + [np.array([v]) for v in singular]
+    for target in targets:
+        if in_cut[target].all():
+            continue
+        distance, predecessors, sources = csgraph.dijkstra(
+            graph, directed=False, indices=np.flatnonzero(in_cut), return_predecessors=True,
+            min_only=True)
+        start = int(target[np.argmin(distance[target])])
+        if not np.isfinite(distance[start]):
+            raise ValueError("the mesh is not connected: no path to cut along")
+        v = start
+        while not in_cut[v]:
+            u = int(predecessors[v])
+            cut.append(int(edge_id[u, v]) - 1)
+            in_cut[v] = True
+            v = u
+        in_cut[target] = True
+        paths += 1
+    return np.array(sorted(set(cut)), dtype=np.int64), paths
+
+
+def comb(angle, faces, k, cut) -> np.ndarray:
+    """Label turn r_f per triangle: r_g = r_f + k_fg across the edges of a spanning tree of
+    the dual graph without the cut edges (breadth first from triangle 0)."""
+    m = angle.size
+    inner = faces[:, 1] >= 0
+    allowed = inner.copy()
+    allowed[cut] = False
+    ids = np.flatnonzero(allowed)
+    f, g = faces[ids, 0], faces[ids, 1]
+    graph = sp.csr_matrix((ids + 1.0, (f, g)), shape=(m, m))
+    graph = graph + graph.T
+    count, _ = csgraph.connected_components(graph, directed=False)
+    if count != 1:
+        raise ValueError(f"the cut splits the mesh into {count} pieces")
+    order, predecessors = csgraph.breadth_first_order(graph, 0, directed=False,
+                                                      return_predecessors=True)
+    r = np.zeros(m, dtype=np.int64)
+    for child in order[1:]:
+        parent = predecessors[child]
+        e = int(graph[parent, child]) - 1
+        if faces[e, 0] == parent:  # k aligns faces[:, 1] (the child) to faces[:, 0]
+            r[child] = r[parent] + k[e]
+        else:  # the child is faces[e, 0]: the inverse turn
+            r[child] = r[parent] - k[e]
+    return np.mod(r, 4)
+
+
+def jumps(faces, k, r) -> np.ndarray:
+    """j_e = r_g − r_f − k_fg (mod 4) per edge: g's combed frame is f's turned by j_e
+    (0 wherever the combing is consistent; boundary edges 0)."""
+    j = np.zeros(faces.shape[0], dtype=np.int64)
+    inner = faces[:, 1] >= 0
+    f, g = faces[inner, 0], faces[inner, 1]
+    j[inner] = np.mod(r[g] - r[f] - k[inner], 4)
+    return j
+
+
+def wedges(cells, edges, faces, cut) -> np.ndarray:
+    """Vertex of the cut mesh of every triangle corner, shape (m, 3): corners of one vertex
+    are joined across every interior edge that is not cut."""
+    m = cells.shape[0]
+    inner = faces[:, 1] >= 0
+    joined = inner.copy()
+    joined[cut] = False
+    ids = np.flatnonzero(joined)
+    corner = lambda face, vertex: 3 * face + np.argmax(cells[face] == vertex[:, None], axis=1)  # noqa: E731
+    rows, cols = [], []
+    for end in (0, 1):
+        v = edges[ids, end]
+        rows.append(corner(faces[ids, 0], v))
+        cols.append(corner(faces[ids, 1], v))
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(3 * m, 3 * m))
+    _, label = csgraph.connected_components(graph, directed=False)
+    return label.reshape(m, 3)
+
+
+@dataclass(frozen=True)
+class CutMesh:
+    """A triangle mesh cut into a disk, with its combed frame field (all global arrays).
+
+    ``x`` (n, 2), ``cells`` (m, 3) counter-clockwise; ``angle``, ``l1``, ``l2`` the combed
+    frame per triangle (labels turned by ``r``); ``edges``/``faces`` the edge table;
+    ``cut`` the cut edge ids, ``jump`` per edge; ``corners`` (m, 3) the cut-mesh vertex of
+    each corner; ``singular`` the singular vertices and their turns; ``paths`` the number
+    of cut paths.
+    """
+
+    x: np.ndarray
+    cells: np.ndarray
+    angle: np.ndarray
+    l1: np.ndarray
+    l2: np.ndarray
+    edges: np.ndarray
+    faces: np.ndarray
+    cut: np.ndarray
+    jump: np.ndarray
+    corners: np.ndarray
+    singular: np.ndarray
+    turns: np.ndarray
+    paths: int
+
+    @property
+    def num_wedges(self) -> int:
+        return int(self.corners.max()) + 1
+
+    @property
+    def cut_length(self) -> float:
+        e = self.edges[self.cut]
+        return float(np.linalg.norm(self.x[e[:, 1]] - self.x[e[:, 0]], axis=1).sum())
+
+
+def cut_mesh(x, cells, q) -> CutMesh:
+    """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``."""
+    x = np.asarray(x, dtype=np.float64)[:, :2]
+    cells = np.asarray(cells, dtype=np.int64)
+    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
+    clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
+    angle, l1, l2 = face_frames(cells, np.asarray(q, dtype=np.float64))
+    edges, faces, _ = interior_edges(cells)
+    k = matchings(angle, faces)
+    singular, turns = singular_vertices(cells, angle, edges, faces)
+    cut, paths = cut_graph(x, cells, edges, faces, singular)
+    r = comb(angle, faces, k, cut)
+    angle, l1, l2 = relabel(angle, l1, l2, r)
+    jump = jumps(faces, k, r)
+    corners = wedges(cells, edges, faces, cut)
+    return CutMesh(x=x, cells=cells, angle=angle, l1=l1, l2=l2, edges=edges, faces=faces,
+                   cut=cut, jump=jump, corners=corners, singular=singular, turns=turns,
+                   paths=paths)

@@ -1,0 +1,195 @@
+r"""Seamless integration of a combed frame field: the P1 map (U, V) on the cut mesh.
+
+On the cut mesh (:class:`~ufl_frames.param.cut.CutMesh`) the combed frame of triangle f has
+branches u_f (angle t_f, length l1) and v_f (t_f + 90°, length l2); an integrable field is
+the gradient of a map, ∇U = u/|u|², ∇V = v/|v|². So (U, V), P1 on the cut mesh's vertices
+(the wedges), minimises
+
+    Σ_f |f| ( |∇U_f − s u_f/|u_f|²|² + |∇V_f − s v_f/|v_f|²|² )
+
+(s the global scale: U and V advance by 1 per quad edge of length |u|/s) subject to
+
+* seams: across a cut edge with jump j (g's frame is f's turned by j quarter turns) the two
+  sides are related by (U, V)_g = Rot^j (U, V)_f + t, Rot(U, V) = (V, −U), with one
+  translation t along each seam — imposed without t as equal differences at the two ends
+  of every cut edge;
+* boundary alignment: along a boundary edge the coordinate whose branch crosses the edge
+  (the branch more normal to it) is constant;
+* U = V = 0 at one wedge (the map is defined up to a translation).
+
+The equality constraints are eliminated (sparse Gaussian elimination with substitution:
+every constraint has four or two ±1 terms, and redundant ones — around a closed loop of
+seams, say — reduce to 0 = 0 and are dropped), leaving a sparse SPD system for the free
+unknowns, solved directly (SciPy's SuperLU). Pure NumPy/SciPy.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ufl_frames.param.cut import CutMesh
+
+__all__ = ["Parametrisation", "gradients", "integrate", "targets"]
+
+
+def gradients(x: np.ndarray, cells: np.ndarray):
+    """Per triangle its area (m,) and the gradients of its three P1 hat functions (m, 3, 2)."""
+    p = x[cells]  # (m, 3, 2)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    # ∇φ_i = rot(opposite edge) / (2 area): opposite edges p2−p1, p0−p2, p1−p0
+    opposite = np.stack([p[:, 2] - p[:, 1], p[:, 0] - p[:, 2], p[:, 1] - p[:, 0]], axis=1)
+    grad = np.stack([-opposite[..., 1], opposite[..., 0]], axis=-1) / det[:, None, None]
+    return 0.5 * det, grad
+
+
+def targets(mesh: CutMesh, scale: float):
+    """s u/|u|² and s v/|v|² per triangle, (m, 2) each."""
+    c, s = np.cos(mesh.angle), np.sin(mesh.angle)
+    target_u = scale * np.stack([c, s], axis=1) / mesh.l1[:, None]
+    target_v = scale * np.stack([-s, c], axis=1) / mesh.l2[:, None]
+    return target_u, target_v
+
+
+def _rot(j: int) -> np.ndarray:
+    """Rot^j as a 2 × 2 matrix, Rot(U, V) = (V, −U)."""
+    return np.linalg.matrix_power(np.array([[0.0, 1.0], [-1.0, 0.0]]), int(j) % 4)
+
+
+def _constraints(mesh: CutMesh) -> list[dict]:
+    """Sparse rows {scalar unknown: coefficient} = 0 (unknown 2w + c: coordinate c of wedge w)."""
+    rows = []
+    cells, corners, edges, faces = mesh.cells, mesh.corners, mesh.edges, mesh.faces
+
+    def wedge(face, vertex):
+        return int(corners[face, int(np.flatnonzero(cells[face] == vertex)[0])])
+
+    for e in mesh.cut:
+        f, g = int(faces[e, 0]), int(faces[e, 1])
+        rot = _rot(mesh.jump[e])
+        a, b = int(edges[e, 0]), int(edges[e, 1])
+        wf_a, wf_b, wg_a, wg_b = wedge(f, a), wedge(f, b), wedge(g, a), wedge(g, b)
+        for c in range(2):  # (X_g(a) − Rot X_f(a)) − (X_g(b) − Rot X_f(b)) = 0, component c
+            row: dict[int, float] = {}
+
+            def add(var, coef, row=row):
+                row[var] = row.get(var, 0.0) + coef
+
+            add(2 * wg_a + c, 1.0)
+            add(2 * wg_b + c, -1.0)
+            for d in range(2):
+                if rot[c, d]:
+                    add(2 * wf_a + d, -rot[c, d])
+                    add(2 * wf_b + d, rot[c, d])
+            rows.append(row)
+    boundary = np.flatnonzero(faces[:, 1] < 0)
+    x = mesh.x
+    for e in boundary:
+        f = int(faces[e, 0])
+        a, b = int(edges[e, 0]), int(edges[e, 1])
+        direction = x[b] - x[a]
+        u = np.array([np.cos(mesh.angle[f]), np.sin(mesh.angle[f])])
+        v = np.array([-u[1], u[0]])
+        # the branch crossing the edge: its coordinate is constant along it
+        c = 0 if abs(u @ direction) < abs(v @ direction) else 1
+        rows.append({2 * wedge(f, a) + c: 1.0, 2 * wedge(f, b) + c: -1.0})
+    rows.append({0: 1.0})
+    rows.append({1: 1.0})
+    return rows
+
+
+def _eliminate(rows: list[dict], count: int) -> sp.csr_matrix:
+    """T (count × free) with x = T y for every x satisfying the homogeneous ``rows``."""
+    expression: dict[int, dict[int, float]] = {}  # eliminated var -> {free var: coef}
+    users: dict[int, set] = {}  # free var -> eliminated vars whose expression uses it
+    for row in rows:
+        reduced: dict[int, float] = {}
+        for var, coef in row.items():
+            if var in expression:
+                for other, c in expression[var].items():
+                    reduced[other] = reduced.get(other, 0.0) + coef * c
+            else:
+                reduced[var] = reduced.get(var, 0.0) + coef
+        reduced = {v: c for v, c in reduced.items() if abs(c) > 1e-12}
+        if not reduced:
+            continue  # redundant
+        pivot = max(reduced, key=lambda v: (abs(reduced[v]), -len(users.get(v, ()))))
+        scale = -1.0 / reduced.pop(pivot)
+        pivot_expr = {v: c * scale for v, c in reduced.items()}
+        # substitute the pivot in the expressions that use it
+        for user in users.pop(pivot, set()):
+            expr = expression[user]
+            coef = expr.pop(pivot)
+            for v, c in pivot_expr.items():
+                new = expr.get(v, 0.0) + coef * c
+                if abs(new) > 1e-12:
+                    expr[v] = new
+                    users.setdefault(v, set()).add(user)
+                else:
+                    expr.pop(v, None)
+                    users.get(v, set()).discard(user)
+        expression[pivot] = pivot_expr
+        for v in pivot_expr:
+            users.setdefault(v, set()).add(pivot)
+    free = np.array([v for v in range(count) if v not in expression], dtype=np.int64)
+    column = np.full(count, -1, dtype=np.int64)
+    column[free] = np.arange(free.size)
+    rows_t, cols_t, vals_t = list(free), list(column[free]), [1.0] * free.size
+    for var, expr in expression.items():
+        for v, c in expr.items():
+            rows_t.append(var)
+            cols_t.append(column[v])
+            vals_t.append(c)
+    return sp.csr_matrix((vals_t, (rows_t, cols_t)), shape=(count, free.size))
+
+
+@dataclass(frozen=True)
+class Parametrisation:
+    """(U, V) per wedge of ``mesh`` (``uv`` (W, 2)), the scale s, and per triangle the
+    Jacobian rows ∇U, ∇V ((m, 2) each) and the targets."""
+
+    mesh: CutMesh
+    uv: np.ndarray
+    scale: float
+    grad_u: np.ndarray
+    grad_v: np.ndarray
+    target_u: np.ndarray
+    target_v: np.ndarray
+    area: np.ndarray
+
+    def corner_values(self) -> np.ndarray:
+        """(U, V) at the corners of every triangle, (m, 3, 2)."""
+        return self.uv[self.mesh.corners]
+
+
+def integrate(mesh: CutMesh, scale: float = 1.0) -> Parametrisation:
+    """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``."""
+    area, grad = gradients(mesh.x, mesh.cells)
+    target_u, target_v = targets(mesh, scale)
+    m, count = mesh.cells.shape[0], 2 * mesh.num_wedges
+    # Rows: √|f| ∂_k X_c on triangle f, for c (U, V) and k (x, y): 4 per triangle.
+    weight = np.sqrt(area)
+    rows, cols, vals = [], [], []
+    for c in range(2):
+        for k in range(2):
+            row = (4 * np.arange(m) + 2 * c + k)[:, None].repeat(3, axis=1)
+            rows.append(row.ravel())
+            cols.append((2 * mesh.corners + c).ravel())
+            vals.append((weight[:, None] * grad[:, :, k]).ravel())
+    A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(4 * m, count))
+    b = np.empty(4 * m)
+    b[0::4], b[1::4] = weight * target_u[:, 0], weight * target_u[:, 1]
+    b[2::4], b[3::4] = weight * target_v[:, 0], weight * target_v[:, 1]
+    T = _eliminate(_constraints(mesh), count)
+    AT = (A @ T).tocsc()
+    normal = (AT.T @ AT).tocsc()
+    y = spla.spsolve(normal, AT.T @ b)
+    uv = (T @ y).reshape(-1, 2)
+    corner = uv[mesh.corners]  # (m, 3, 2)
+    grad_u = np.einsum("mi,mik->mk", corner[..., 0], grad)
+    grad_v = np.einsum("mi,mik->mk", corner[..., 1], grad)
+    return Parametrisation(mesh=mesh, uv=uv, scale=scale, grad_u=grad_u, grad_v=grad_v,
+                           target_u=target_u, target_v=target_v, area=area)

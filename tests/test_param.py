@@ -1,0 +1,103 @@
+"""Cut graph, combing and seamless integration (``ufl_frames.param``), pure NumPy/SciPy.
+
+Truth: fields with a known map. A constant frame on a rectangle integrates to an affine map
+(exactly: misfit at rounding); the isotropic annulus field (r e_r, r e_θ) integrates to
+(ln r, θ), multivalued: one cut from the inner to the outer circle, across which V jumps by
+2π, and the misfit of the P1 map falls as O(h) (the targets are sampled per triangle). A
+field turning by a quarter around a point has one singular vertex, cut to the boundary.
+"""
+
+import numpy as np
+import pytest
+
+from ufl_frames.frames2d import odeco
+from ufl_frames.param import cut, measures, seamless
+
+
+def grid(nx, ny, x0=0.0, x1=1.0, y0=0.0, y1=1.0):
+    """Structured right triangles on a rectangle (alternating diagonals)."""
+    xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    x = np.stack([X.ravel(), Y.ravel()], axis=1)
+    idx = np.arange(x.shape[0]).reshape(nx + 1, ny + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    flip = ((np.arange(nx)[:, None] + np.arange(ny)[None, :]) % 2).astype(bool)
+    t1 = np.where(flip[..., None], np.stack([a, b, d], -1), np.stack([a, b, c], -1))
+    t2 = np.where(flip[..., None], np.stack([b, c, d], -1), np.stack([a, c, d], -1))
+    return x, np.concatenate([t1.reshape(-1, 3), t2.reshape(-1, 3)])
+
+
+def annulus(nr, nt, r0=0.5, r1=1.0):
+    """The annulus as a polar grid, periodic in θ."""
+    r = np.linspace(r0, r1, nr + 1)
+    t = np.linspace(0, 2 * np.pi, nt, endpoint=False)
+    R, T = np.meshgrid(r, t, indexing="ij")
+    x = np.stack([(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel()], axis=1)
+    idx = np.arange(x.shape[0]).reshape(nr + 1, nt)
+    a, b = idx[:-1], idx[1:]
+    c, d = np.roll(b, -1, axis=1), np.roll(a, -1, axis=1)
+    cells = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                            np.stack([a, c, d], -1).reshape(-1, 3)])
+    return x, cells
+
+
+def test_constant_field_integrates_to_an_affine_map():
+    x, cells = grid(8, 6, 0, 2, 0, 1)
+    t = 0.0  # aligned with the rectangle's sides (boundary alignment holds)
+    q = odeco.frames_to_q(np.tile([[2.0, 1.0]], (x.shape[0], 1)), np.full(x.shape[0], t))
+    mesh = cut.cut_mesh(x, cells, q)
+    assert mesh.paths == 0 and mesh.cut.size == 0 and mesh.singular.size == 0
+    p = seamless.integrate(mesh, scale=4.0)
+    found = measures.quality(p)
+    assert found["misfit"] < 1e-12 and found["flipped_triangles"] == 0
+    uv = p.uv[mesh.corners[:, 0]]
+    xy = x[mesh.cells[:, 0]]
+    # the map is affine: (U, V) = s (x / l1, y / l2) up to a translation and a relabelling
+    fit, *_ = np.linalg.lstsq(np.c_[xy, np.ones(len(xy))], uv, rcond=None)
+    assert np.allclose(np.abs(fit[:2]), [[2.0, 0.0], [0.0, 4.0]], atol=1e-10) or \
+        np.allclose(np.abs(fit[:2]), [[0.0, 2.0], [4.0, 0.0]], atol=1e-10)
+
+
+def annulus_field(x):
+    r, theta = np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])
+    return odeco.frames_to_q(np.stack([r, r], axis=1), theta)
+
+
+@pytest.mark.parametrize("n", [8])
+def test_annulus_is_cut_once_and_integrates_to_log_polar(n):
+    misfits = []
+    for refine in (1, 2, 4):
+        x, cells = annulus(n * refine, 6 * n * refine)
+        mesh = cut.cut_mesh(x, cells, annulus_field(x))
+        assert mesh.singular.size == 0
+        assert mesh.paths == 1
+        assert mesh.cut_length == pytest.approx(0.5, rel=1e-9)  # a radial segment
+        p = seamless.integrate(mesh)
+        found = measures.quality(p)
+        assert found["flipped_triangles"] == 0
+        misfits.append(found["misfit"])
+        # U (or V, by the labels) = ln r + c; the other coordinate advances by 2π once round
+        corner_uv = p.corner_values()
+        r = np.hypot(*x[mesh.cells].transpose(2, 0, 1))
+        radial = [np.ptp(corner_uv[..., c] - np.log(r)) for c in range(2)]
+        c = int(np.argmin(radial))
+        assert radial[c] < 0.05 / refine
+        span = np.ptp(corner_uv[..., 1 - c])
+        assert span == pytest.approx(2 * np.pi, rel=0.02 / refine)
+    rates = np.log2(np.array(misfits[:-1]) / np.array(misfits[1:]))
+    assert np.all(rates > 0.9), (misfits, rates)
+
+
+def test_quarter_turn_field_has_one_singular_vertex_cut_to_the_boundary():
+    x, cells = grid(10, 10, -1, 1, -1, 1)
+    theta = np.arctan2(x[:, 1] + 0.05, x[:, 0] + 0.03)  # centre inside a triangle-free spot
+    q = odeco.frames_to_q(np.ones((x.shape[0], 2)), theta / 4)
+    mesh = cut.cut_mesh(x, cells, q)
+    assert mesh.singular.size == 1 and abs(int(mesh.turns[0])) == 1
+    assert mesh.paths == 1
+    assert np.any(mesh.jump[mesh.cut] != 0)
+    # away from the cut the combing is consistent: no other edge jumps
+    others = np.setdiff1d(np.flatnonzero(mesh.faces[:, 1] >= 0), mesh.cut)
+    assert np.all(mesh.jump[others] == 0)
+    p = seamless.integrate(mesh)
+    assert np.all(np.isfinite(p.uv))
