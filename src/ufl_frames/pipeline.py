@@ -35,6 +35,9 @@ from ufl_frames.solvers import mbo  # noqa: E402
 
 __all__ = ["FrameField"]
 
+#: Default quad size of :meth:`FrameField.parametrise`: about one quad per this many triangles.
+TRIANGLES_PER_QUAD = 8
+
 
 @dataclass
 class FrameField:
@@ -58,6 +61,9 @@ class FrameField:
     singularities: list[dict] = field(default_factory=list)
     #: Whether the last :meth:`solve` held the singular triangles' orientation.
     pinned_singularities: bool | None = None
+    #: The last :meth:`parametrise`'s map (on rank 0; None elsewhere) and its measures.
+    parametrisation: object | None = field(default=None, repr=False)
+    param_quality: dict | None = None
 
     @classmethod
     def initial(
@@ -94,6 +100,52 @@ class FrameField:
         self.pinned_singularities = pin_singularities
         return self.result
 
+    def parametrise(self, quad_size: float | None = None) -> dict:
+        """The seamless map (U, V) of the current field (:mod:`ufl_frames.param`): cut,
+        combed and integrated on rank 0; its measures, the same dict on every rank.
+
+        ``quad_size``: the edge length of the quads the integer iso-lines of U and V
+        outline (default: about one quad per :data:`TRIANGLES_PER_QUAD` triangles).
+        """
+        from ufl_frames.param import cut, measures, seamless
+        from ufl_frames.param.gather import gather_field
+
+        comm = self.domain.comm
+        x, cells, rows = gather_field(self.q)
+        result, error = None, None
+        if comm.rank == 0:
+            try:
+                mesh = cut.cut_mesh(x, cells, rows)
+                area, _ = seamless.gradients(mesh.x, mesh.cells)
+                size = np.sqrt(mesh.l1 * mesh.l2)  # the frame's length scale per triangle
+                if quad_size is None:
+                    quads = max(1.0, mesh.cells.shape[0] / TRIANGLES_PER_QUAD)
+                    scale = float(np.sqrt(quads / np.dot(area, 1 / size**2)))
+                else:
+                    scale = float(np.dot(area, size) / area.sum() / quad_size)
+                self.parametrisation = seamless.integrate(mesh, scale)
+                result = measures.quality(self.parametrisation)
+            except (ValueError, np.linalg.LinAlgError, RuntimeError) as e:
+                error = f"cannot parametrise this field: {e}"
+        error = comm.bcast(error, root=0)
+        if error is not None:
+            raise ValueError(error)
+        self.param_quality = comm.bcast(result, root=0)
+        return self.param_quality
+
+    def write_param(self, out, label: str) -> list[str]:
+        """``param.png`` and ``param.vtu`` of the last :meth:`parametrise` into ``out``."""
+        from ufl_frames.param.figures import plot_param, write_param_vtu
+
+        if self.domain.comm.rank == 0:
+            quality = self.param_quality
+            title = (f"{label}: iso-lines of U, V (misfit {quality['misfit']:.3g}, "
+                     f"{quality['flipped_triangles']} flipped, {quality['cuts']} cuts)")
+            plot_param(Path(out) / "param.png", self.parametrisation, title=title)
+            write_param_vtu(Path(out) / "param.vtu", self.parametrisation)
+        self.domain.comm.Barrier()
+        return ["param.png", "param.vtu"]
+
     def summary(self) -> dict:
         """The field's record for ``summary.json`` (JSON types; collective): the kind of
         frames, the mesh, the solve (after :meth:`solve`), singularities, Poincaré–Hopf."""
@@ -120,6 +172,8 @@ class FrameField:
             })
         record["singularities"] = self.singularities
         record["poincare_hopf"] = self.index_theorem()
+        if self.param_quality is not None:
+            record["param"] = self.param_quality
         if result is not None:
             record["history"] = result.history
         return record
