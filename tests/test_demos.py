@@ -23,6 +23,7 @@ EXPECTED_PNGS = {
         "frames_initial.png", "frames_isotropic.png", "frames_nonisotropic.png",
         "convergence_isotropic.png", "convergence_nonisotropic.png", "checks.png",
     ],
+    "demo_param.py": ["param_annulus.png", "param_piano_mbo.png", "param_piano_optimised.png"],
     "demo_piano.py": [
         "frames_initial.png", "frames_isotropic.png", "frames_isotropic_free.png",
         "frames_nonisotropic.png", "convergence_isotropic.png",
