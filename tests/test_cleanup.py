@@ -217,3 +217,30 @@ def test_mbo_error_leaks_nothing(mbo_field, failure):
     assert np.array_equal(q.x.array, reference)
     del q
     assert_no_leak(before)
+
+
+def test_an_exception_in_the_newton_shell_reaches_the_caller(annulus_mesh):
+    """A Python exception in the Newton model's product (a KeyboardInterrupt, say) is
+    kept and raised after TAO stops, not turned into PETSc error 101 and a crash."""
+    mesh = annulus_mesh(0.2)
+    mesh = getattr(mesh, "mesh", mesh)
+    q = mbo.mbo_frame_field(energy.frame_space(mesh), options_prefix="shellerr_mbo_")
+    problem = solvers.frame_problem(q, isotropic=False)
+    calls = []
+    original = solvers.GaussNewtonModel._mult
+
+    def failing(self, v, y):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt("stop")
+        return original(self, v, y)
+
+    solvers.GaussNewtonModel._mult = failing
+    try:
+        with pytest.raises(KeyboardInterrupt, match="stop"):
+            solvers.solve(problem, max_it=5, options_prefix="shellerr_")
+    finally:
+        solvers.GaussNewtonModel._mult = original
+    result = solvers.solve(problem, max_it=2, options_prefix="shellerr_after_")
+    assert result.converged_reason == "DIVERGED_MAXITS"  # the next solve runs normally
+    assert len(calls) >= 3 and np.isfinite(result.H_final)

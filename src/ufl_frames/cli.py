@@ -24,28 +24,48 @@ Every other option with a single dash goes to PETSc: ``-tao_type lmvm``,
 ``-tao_monitor``, ``-tao_max_it 3`` (wins over ``--max-it``), ``-mbo_ksp_type``...
 Put them after GEOMETRY (an option's value is the token right after it).
 
-Errors the user can fix (bad arguments, unknown geometry, unreadable or 3D mesh,
-existing output folder) give one line ``ufl-frames: error: ...`` on stderr and exit
-status 2 (command-line usage) or 1 (the run cannot be done), with nothing written.
-Under ``mpirun`` they are detected identically on every rank (or broadcast from
-rank 0) and reported once. Unexpected errors keep their traceback; in parallel the
-job is then aborted so that no rank hangs.
+Every failure ends with one line ``ufl-frames: error: ...`` on stderr (once per job
+under ``mpirun``) and a status, never a traceback (``UFL_FRAMES_DEBUG=1`` prints it too):
+
+* 2, command-line usage: bad arguments, a PETSc option with a value it cannot take
+  (``-tao_type`` outside :data:`ufl_frames.petsc_options.TAO_TYPES`, a KSP/PC/line-search
+  type PETSc does not have, ``-tao_max_it`` not a positive integer ...), checked before
+  anything is meshed;
+* 1, the run cannot be done: unknown geometry, unreadable or 3D mesh, an unusable
+  output folder, and failures on the way (an MBO or TAO solve PETSc fails, a write error);
+* 130, interrupted (SIGINT, Ctrl-C, or SIGTERM): at the next MBO level or TAO iteration,
+  or within :data:`ufl_frames.interrupts.INTERRUPT_GRACE_S` seconds, whatever runs
+  (meshing at once).
+
+Nothing is written unless the run completes: the results go to a hidden folder next to
+DIR, renamed into place at the end (:class:`ufl_frames.io.OutputFolder`). Under
+``mpirun`` an error every rank meets alike is reported once by rank 0 and every rank
+exits; one that a rank meets alone is printed by that rank, which then aborts the job
+(the others would wait for it forever).
 """
 
 import argparse
 import math
 import os
+import re
 import sys
 import time
+import traceback
 from pathlib import Path
 
-from ufl_frames import __version__
+from ufl_frames import __version__, interrupts
 from ufl_frames.bootstrap import init_petsc, options_scope, petsc_initialised
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
+from ufl_frames.interrupts import INTERRUPTED_STATUS, Interrupted
+from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
 
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.geometry.load
 DEFAULT_MAX_IT = 500
+#: Under MPI, seconds a rank that failed waits for the others to fail too (an error
+#: every rank meets) before it aborts the job (an error of its own).
+AGREEMENT_TIMEOUT_S = 10.0
+DEBUG_VARIABLE = "UFL_FRAMES_DEBUG"
 
 
 class UsageError(Exception):
@@ -58,6 +78,10 @@ class InputError(ValueError):
 
 class OutputFolderError(InputError):
     """The output folder cannot be used (exists and is not empty, not writable...)."""
+
+
+class RunError(RuntimeError):
+    """The run failed after it started (a solve, a write): exit status 1, one line."""
 
 
 # --- argument parsing ----------------------------------------------------------------
@@ -87,6 +111,8 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    if value > MAX_INT:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_INT}, got {text!r}")
     return value
 
 
@@ -195,15 +221,42 @@ def _petsc_argv(options: list[tuple[str, str | None]]) -> list[str]:
     return argv
 
 
+def check_petsc_options(options) -> None:
+    """Raise :class:`UsageError` if :func:`petsc_option_problem` finds one."""
+    problem = petsc_option_problem(options)
+    if problem is not None:
+        raise UsageError(problem)
+
+
+def _check_text(args: list[str]) -> None:
+    """Arguments must be valid UTF-8 (Gmsh, DOLFINx and ADIOS2 take UTF-8 paths)."""
+    for arg in args:
+        try:
+            arg.encode("utf-8")
+        except UnicodeEncodeError:
+            raise UsageError(
+                f"argument {ascii(arg)} is not valid UTF-8 (rename the file or folder)"
+            ) from None
+
+
 # --- output -----------------------------------------------------------------------------
 
 
 def _printer(comm, quiet: bool):
     """print on rank 0 (flushed), or nothing when ``quiet``."""
 
+    closed = False
+
     def say(text: str) -> None:
-        if not quiet and comm.rank == 0:
-            print(text, flush=True)
+        nonlocal closed
+        if not quiet and not closed and comm.rank == 0:
+            try:
+                print(text, flush=True)
+            except BrokenPipeError:  # `ufl-frames ... | head`: the run goes on, silent
+                closed = True
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, sys.stdout.fileno())
+                os.close(devnull)
 
     return say
 
@@ -217,6 +270,11 @@ def _nearest_existing(path: Path) -> Path:
 
 def _output_folder_problem(out: Path, force: bool) -> str | None:
     """Why ``out`` cannot be the output folder, or None (checked on one rank)."""
+    if out.is_symlink() and not out.exists():
+        return f"output path {str(out)!r} is a broken symbolic link"
+    target = Path(os.path.abspath(out)) if not out.is_symlink() else out.resolve()
+    if target.parent == target:
+        return f"output folder {str(out)!r} is a file system root: choose a folder in it"
     if out.exists():
         if not out.is_dir():
             return f"output path {str(out)!r} exists and is not a folder"
@@ -224,6 +282,9 @@ def _output_folder_problem(out: Path, force: bool) -> str | None:
             return f"output folder {str(out)!r} exists and is not empty (use --force to overwrite)"
         if not os.access(out, os.W_OK | os.X_OK):
             return f"output folder {str(out)!r} is not writable"
+        if not os.access(target.parent, os.W_OK | os.X_OK):
+            return (f"cannot write to output folder {str(out)!r}: the results are written next "
+                    f"to it first, and {str(target.parent)!r} is not writable")
         return None
     parent = _nearest_existing(out)
     if not parent.is_dir():
@@ -257,8 +318,8 @@ def _check_parameters(mesh_size, max_it) -> None:
     real = isinstance(mesh_size, (int, float)) and not isinstance(mesh_size, bool)
     if mesh_size is not None and not (real and math.isfinite(mesh_size) and mesh_size > 0):
         raise InputError(f"mesh size must be a positive number, got {mesh_size!r}")
-    if isinstance(max_it, bool) or not isinstance(max_it, int) or max_it <= 0:
-        raise InputError(f"max-it must be a positive integer, got {max_it!r}")
+    if isinstance(max_it, bool) or not isinstance(max_it, int) or not 0 < max_it <= MAX_INT:
+        raise InputError(f"max-it must be a positive integer at most {MAX_INT}, got {max_it!r}")
 
 
 def run_solve(
@@ -278,11 +339,14 @@ def run_solve(
     """Mesh → MBO → TAO → singularities → files in ``out``; return the summary (all ranks).
 
     Collective over ``comm`` (default ``MPI.COMM_WORLD``). Raises :class:`InputError`
-    (for a :class:`ufl_frames.geometry.GeometryError`, a bad parameter, an existing
-    non-empty ``out``) on every rank, before anything is computed or written, when the
-    input is unusable; other exceptions are bugs or failures and keep their type.
-    PETSc options in the database (``-tao_type`` ...) are honoured; the defaults the
-    solvers add to the database are removed afterwards.
+    (for a :class:`ufl_frames.geometry.GeometryError`, a bad parameter or PETSc option in
+    the database, an existing non-empty ``out``) on every rank, before anything is
+    computed or written, when the input is unusable; :class:`RunError` when a solve or
+    writing the results fails on every rank alike (a PETSc error, a full disk); other
+    exceptions are bugs and keep their type. ``out`` is written whole or not at all
+    (:class:`ufl_frames.io.OutputFolder`). PETSc options in the database
+    (``-tao_type`` ...) are honoured; the defaults the solvers add to the database are
+    removed afterwards.
     """
     init_petsc()
     from mpi4py import MPI
@@ -299,39 +363,50 @@ def run_solve(
     geometry = str(geometry)
     out = default_output_folder(geometry) if out is None else Path(out)
     _check_parameters(mesh_size, max_it)
+    problem = petsc_option_problem(user_options)
+    if problem is not None:
+        raise InputError(problem)
     check_output_folder(out, force, comm)
     size = "relative to the shape" if mesh_size is None else f"mesh size {mesh_size:g}"
     say(f"meshing {geometry} ({size}) ...")
     limit = {} if max_triangles is None else {"max_triangles": max_triangles}
+    interrupts.set_stage("meshing")
     try:
         domain = geometry_module.build(comm, geometry, mesh_size, size_factor, **limit)
     except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
+    interrupts.set_stage("the MBO initial field")
+    interrupts.checkpoint(comm)
     for note in domain.notes:
         say(f"  note: {note}")
     say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
         f"{domain.mesh_size:.3g}), {comm.size} process{'es' if comm.size > 1 else ''}")
 
+    def mbo_monitor(level, tau, change):
+        say(f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}")
+        interrupts.checkpoint(comm)
+
+    def tao_monitor(e):
+        say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
+            + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else ""))
+        interrupts.checkpoint(comm)
+
     with options_scope():  # the solvers' defaults end with the run
         say("MBO initial field ...")
-        field = FrameField.initial(
-            domain, isotropic=isotropic, max_aspect=max_aspect,
-            monitor=lambda level, tau, change: say(
-                f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}"
-            ),
-        )
+        with _failures("the MBO initial field"):
+            field = FrameField.initial(domain, isotropic=isotropic, max_aspect=max_aspect,
+                                       monitor=mbo_monitor)
         tao_type = PETSc.Options().getString("tao_type", solvers.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
+        interrupts.set_stage(f"the TAO solve ({tao_type})")
+        interrupts.checkpoint(comm)
         say(f"solving ({kind}, TAO {tao_type}) ...")
-        result = field.solve(
-            pin_singularities=not free_singularities,
-            max_it=max_it,
-            monitor=lambda e: say(
-                f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
-                + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else "")
-            ),
-        )
+        with _failures(f"the TAO solve ({tao_type})"):
+            result = field.solve(pin_singularities=not free_singularities, max_it=max_it,
+                                 monitor=tao_monitor)
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins
+    interrupts.set_stage("writing the results")
+    interrupts.checkpoint(comm)
     converged = result.converged_reason.startswith("CONVERGED")
     say(f"{result.converged_reason} after {result.iterations} iterations "
         f"({result.wall_time_s:.2f} s): H {result.H_initial:.4e} -> {result.H_final:.4e}")
@@ -347,29 +422,93 @@ def run_solve(
               "is too coarse for the field somewhere; try a smaller --mesh-size",
               file=sys.stderr)
 
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-    comm.Barrier()
-    files = field.write(out, label=Path(geometry).stem, tao_type=tao_type) + ["summary.json"]
-    record = field.summary()
-    summary = {
-        "ufl_frames_version": __version__,
-        "geometry": geometry,
-        **{key: record.pop(key) for key in ("isotropic", "max_aspect", "pinned_singularities",
-                                            "mesh_size", "requested_mesh_size")},
-        "size_factor": float(size_factor),
-        "loader_notes": list(domain.notes),
-        "max_it": int(max_it),
-        "num_processes": comm.size,
-        "tao_type": tao_type,
-        "petsc_options": user_options,
-        **record,
-        "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
-        "files": files,
-    }
-    io.write_summary(out / "summary.json", summary, comm=comm)
+    folder = io.OutputFolder(out, force=force, comm=comm)
+    try:
+        with _failures(f"writing the results to {str(out)!r}", writing=True):
+            staging = folder.open()
+            interrupts.attach_output(folder)
+            files = field.write(staging, label=Path(geometry).stem, tao_type=tao_type)
+            files.append("summary.json")
+            record = field.summary()
+            summary = {
+                "ufl_frames_version": __version__,
+                "geometry": geometry,
+                **{key: record.pop(key) for key in ("isotropic", "max_aspect",
+                                                    "pinned_singularities", "mesh_size",
+                                                    "requested_mesh_size")},
+                "size_factor": float(size_factor),
+                "loader_notes": list(domain.notes),
+                "max_it": int(max_it),
+                "num_processes": comm.size,
+                "tao_type": tao_type,
+                "petsc_options": user_options,
+                **record,
+                "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+                "files": files,
+            }
+            io.write_summary(staging / "summary.json", summary, comm=comm)
+            interrupts.checkpoint(comm)
+            interrupts.set_stage("commit")
+            folder.commit()
+    except BaseException:
+        folder.discard(here=True)  # every rank that fails: perhaps one alone, then aborting
+        raise
+    finally:
+        interrupts.attach_output(None)
+    interrupts.set_stage("done")
     say(f"wrote {out}/: {', '.join(files)}")
     return summary
+
+
+class _failures:
+    """Turn the failures a user can meet in a stage into :class:`RunError` (one line).
+
+    PETSc errors (a solve PETSc gives up on), RuntimeError (raised for failed MBO
+    solves), and, when ``writing``, OSError (a full disk, a path under /proc); the
+    original stays as ``__cause__`` for the traceback of ``UFL_FRAMES_DEBUG``.
+    """
+
+    def __init__(self, stage: str, writing: bool = False):
+        self.stage = stage
+        self.writing = writing
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        if exc is None or not isinstance(exc, Exception) or isinstance(exc, (InputError,
+                                                                              RunError)):
+            return False
+        if type(exc).__name__ == "OutputFolderBusy":  # ufl_frames.io: says it all
+            raise RunError(exc.strerror) from exc
+        text = describe_exception(exc)
+        if self.writing and isinstance(exc, OSError):
+            raise RunError(f"{self.stage} failed: {text}") from exc
+        if isinstance(exc, RuntimeError):  # petsc4py.PETSc.Error is one
+            raise RunError(f"{self.stage} failed: {text}") from exc
+        if self.writing and isinstance(exc, (ValueError, TypeError)):  # e.g. encoding
+            raise RunError(f"{self.stage} failed: {text}") from exc
+        return False
+
+
+def describe_exception(exc: BaseException) -> str:
+    """``exc`` on one line; PETSc errors as their code, class and message."""
+    text = str(exc)
+    if type(exc).__name__ == "Error" and type(exc).__module__.startswith("petsc4py"):
+        lines = [re.sub(r"^\[\d+\]\s*", "", line).strip() for line in text.splitlines()]
+        first = lines[0] if lines else ""
+        messages = [line for line in lines[1:] if line and not re.search(r"\(\) at \S+:\d+$",
+                                                                          line)]
+        code = getattr(exc, "ierr", None)
+        text = f"PETSc error {code}" if code is not None else first
+        if messages:
+            text += ": " + ": ".join(messages)
+    elif isinstance(exc, OSError) and exc.strerror:
+        text = f"{exc.strerror}: {str(exc.filename)!r}" if exc.filename else exc.strerror
+    text = " ".join(text.split())
+    if not text:
+        return type(exc).__name__
+    return text
 
 
 # --- info -------------------------------------------------------------------------------
@@ -423,18 +562,88 @@ def _rank() -> int:
     return MPI.COMM_WORLD.rank
 
 
+def _debug() -> bool:
+    return os.environ.get(DEBUG_VARIABLE, "").strip().lower() not in ("", "0", "false", "no")
+
+
+def _print_error(message: str) -> None:
+    text = " ".join(str(message).split())
+    try:
+        print(f"{PROG}: error: {text}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):  # stderr closed: nothing more to do
+        pass
+
+
 def _fail(message: str, status: int) -> int:
     """Report ``message`` once (rank 0) as one line on stderr; return ``status``."""
     if _rank() == 0:
-        text = " ".join(str(message).split())
-        print(f"{PROG}: error: {text}", file=sys.stderr, flush=True)
+        _print_error(message)
+    _quiet_petsc_finalize()
     return status
+
+
+def _quiet_petsc_finalize() -> None:
+    """No "options you set that were not used" report from PETSc after a failed run."""
+    from petsc4py import PETSc
+
+    db = PETSc.Options()
+    if not db.hasName("options_left"):
+        db.setValue("options_left", "no")
+
+
+def _failure_status(exc: BaseException) -> tuple[int, str, bool]:
+    """(exit status, one-line message, expected) for an exception out of a run."""
+    if isinstance(exc, KeyboardInterrupt):
+        if isinstance(exc, Interrupted):
+            return INTERRUPTED_STATUS, str(exc), True
+        return INTERRUPTED_STATUS, "interrupted; nothing written", True
+    if isinstance(exc, (InputError, RunError)):
+        return 1, str(exc), True
+    if isinstance(exc, MemoryError):
+        return 1, "out of memory (try a larger --mesh-size or more processes)", True
+    return 1, (f"internal error: {type(exc).__name__}: {describe_exception(exc)} (set "
+               f"{DEBUG_VARIABLE}=1 for the traceback)"), False
+
+
+def _all_failed(agreement, timeout: float) -> bool:
+    """Whether every rank of ``agreement`` (a communicator used for nothing else) reaches
+    this point within ``timeout`` seconds: an error all ranks met, not one rank's own."""
+    request = agreement.Ibarrier()
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if request.Test():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def _report_failure(exc: BaseException, comm, agreement) -> int:
+    """One line for ``exc`` (once per job), the traceback with ``UFL_FRAMES_DEBUG``; the
+    exit status. Under MPI a failure every rank met returns on every rank; one a rank met
+    alone is printed by it and aborts the job."""
+    status, message, expected = _failure_status(exc)
+    if _debug():
+        traceback.print_exception(exc, file=sys.stderr)
+    if comm.size == 1 or _all_failed(agreement, AGREEMENT_TIMEOUT_S):
+        if comm.rank == 0:
+            _print_error(message)
+        return status
+    _print_error(f"{message} (on rank {comm.rank} alone: aborting the job)")
+    comm.Abort(status)
+    return status  # not reached
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the ``ufl-frames`` command with ``argv`` (default ``sys.argv[1:]``); exit status."""
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     try:
+        os.getcwd()
+    except OSError as e:  # PETSc would fail to start, with a page of errors
+        if os.environ.get("PMI_RANK", "0") == "0":
+            _print_error(f"the current folder is not usable ({e.strerror}): cd elsewhere")
+        return 1
+    try:
+        _check_text(argv)
         args, extras = build_parser().parse_known_args(argv)
         options = split_petsc_options(extras)
         if args.command is None:
@@ -442,45 +651,62 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as e:
         return _fail(str(e), 2)
 
-    # PETSc reads its options now, before anything imports dolfinx (start-up options such
-    # as -log_view work only so); called in-process, options_scope puts them in below.
-    if not petsc_initialised():
-        init_petsc([PROG, *_petsc_argv(options)])
-    from mpi4py import MPI
-
-    comm = MPI.COMM_WORLD
     if args.command == "info":
-        return _info(comm)
+        if not petsc_initialised():
+            init_petsc([PROG, *_petsc_argv(options)])
+        from mpi4py import MPI
 
-    with options_scope(options):  # this run's options, removed afterwards
+        return _info(MPI.COMM_WORLD)
+
+    status = 0
+    # The signals are taken over before PETSc and MPI start: threads they start inherit
+    # the blocked signals (one that did not would die of SIGTERM).
+    with interrupts.SignalWatch(report=_print_error) as watch:
+        # PETSc reads its options now, before anything imports dolfinx (start-up options
+        # such as -log_view work only so); called in-process, options_scope puts them in.
+        if not petsc_initialised():
+            init_petsc([PROG, *_petsc_argv(options)])
+        from mpi4py import MPI
+
+        comm = watch.comm = MPI.COMM_WORLD
         try:
-            run_solve(
-                args.geometry,
-                isotropic=args.isotropic,
-                mesh_size=args.mesh_size,
-                max_it=args.max_it,
-                out=args.out,
-                force=args.force,
-                quiet=args.quiet,
-                comm=comm,
-                max_aspect=args.max_aspect,
-                free_singularities=args.free_singularities,
-                size_factor=args.size_factor,
-                max_triangles=args.max_triangles,
-            )
-        except InputError as e:  # raised on every rank alike (geometry, parameters, folder)
-            return _fail(str(e), 1)
-        except Exception:
-            # Unexpected: keep the traceback. One rank failing alone would leave the others
-            # waiting in a collective call, so abort the whole job.
-            if comm.size > 1:
-                import traceback
-
-                traceback.print_exc()
-                sys.stderr.flush()
-                comm.Abort(1)
-            raise
-    return 0
+            check_petsc_options(options)  # before anything is meshed
+        except UsageError as e:
+            return _fail(str(e), 2)
+        agreement = comm.Dup() if comm.size > 1 else None  # for failures only
+        try:
+            with options_scope(options):  # this run's options, removed afterwards
+                interrupts.activate(watch)
+                try:
+                    run_solve(
+                        args.geometry,
+                        isotropic=args.isotropic,
+                        mesh_size=args.mesh_size,
+                        max_it=args.max_it,
+                        out=args.out,
+                        force=args.force,
+                        quiet=args.quiet,
+                        comm=comm,
+                        max_aspect=args.max_aspect,
+                        free_singularities=args.free_singularities,
+                        size_factor=args.size_factor,
+                        max_triangles=args.max_triangles,
+                    )
+                except Exception as e:
+                    watch.stage = "reporting the failure"
+                    status = _report_failure(e, comm, agreement)
+                except KeyboardInterrupt as e:
+                    watch.stage = "reporting the failure"
+                    watch.handled.set()  # a second signal now ends the process
+                    status = _report_failure(e, comm, agreement)
+                finally:
+                    interrupts.activate(None)
+        finally:
+            if agreement is not None:
+                agreement.Free()
+    if status:
+        _quiet_petsc_finalize()  # after options_scope, which would take it out again
+    return status
 
 
 if __name__ == "__main__":

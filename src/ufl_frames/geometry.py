@@ -58,6 +58,7 @@ import contextlib
 import math
 import numbers
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -328,6 +329,8 @@ def load(
             raise GeometryError(f"geometry file not found: {source!r}")
         if ext in MESH_EXTENSIONS:
             _check_msh_header(path)
+        if ext in GEO_EXTENSIONS:
+            _check_geo_script(path)
         _merge(path, quiet=ext in CAD_EXTENSIONS)
         if ext in MESH_EXTENSIONS:
             _check_no_3d_mesh(source)
@@ -412,6 +415,44 @@ def _check_msh_header(path: Path) -> None:
         raise GeometryError(f"cannot read {str(path)!r}: {_one_line(e)}") from None
     if not head.startswith((b"$MeshFormat", b"$NOD", b"$NOE")):
         raise GeometryError(f"cannot read {str(path)!r}: not a Gmsh mesh (no $MeshFormat header)")
+
+
+#: Comments and strings of a Gmsh script (``//`` to the end of the line, ``/* */``, "...").
+_GEO_NOISE = re.compile(r'//[^\n]*|/\*.*?(?:\*/|\Z)|"(?:[^"\\]|\\.)*"?', re.DOTALL)
+_GEO_INCLUDE = re.compile(r'\bInclude\s*"((?:[^"\\]|\\.)*)"')
+#: Script commands that end the process from inside Gmsh (``exit()``): no error to catch.
+_GEO_EXIT = re.compile(r"\bExit\b")
+
+
+def _check_geo_script(path: Path, seen: set | None = None) -> None:
+    """Refuse a ``.geo`` (or a file it ``Include``s) that calls ``Exit``: Gmsh would end
+    the whole process there, with status 0 and nothing done."""
+    seen = set() if seen is None else seen
+    key = path.resolve()
+    if key in seen or len(seen) > 100:
+        return
+    seen.add(key)
+    try:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as e:
+        raise GeometryError(f"cannot read {str(path)!r}: {_one_line(e)}") from None
+    def blank(m):  # keeps the line numbers
+        kept = "\n" * m.group(0).count("\n")
+        return f'""{kept}' if m.group(0).startswith('"') else f" {kept}"
+
+    code = _GEO_NOISE.sub(blank, text)
+    match = _GEO_EXIT.search(code)
+    if match is not None:
+        line = code.count("\n", 0, match.start()) + 1
+        raise GeometryError(
+            f"{str(path)!r} line {line} calls Exit, which would end the program inside "
+            "Gmsh: remove it"
+        )
+    no_comments = re.sub(r'//[^\n]*|/\*.*?(?:\*/|\Z)', " ", text, flags=re.DOTALL)
+    for name in _GEO_INCLUDE.findall(no_comments):
+        child = path.parent / name
+        if child.is_file():
+            _check_geo_script(child, seen)
 
 
 def _merge(path: Path, quiet: bool) -> None:

@@ -9,14 +9,26 @@ r"""Results on disk: the run summary, the field for ParaView and the two figures
   (note Fig. 1), sized for the domain's aspect ratio (:func:`frame_layout`).
 * :func:`plot_convergence` — H(q) and E(q) against the iteration (note Fig. 2).
 * :func:`describe_singularities` — a one-line console summary.
+* :class:`OutputFolder` — a run's output folder, written whole or not at all: the files
+  go to a hidden sibling folder, renamed into place when complete.
 
 Every function that takes a DOLFINx object is collective over the mesh communicator
-(call it on all ranks): data are gathered to rank 0, which alone writes.
+(call it on all ranks): data are gathered to rank 0, which alone writes. An error while
+rank 0 writes (a full disk, a folder that went away) is raised on every rank alike:
+rank 0 raises its own exception, the others :class:`WriteError` with its message.
 """
 
+import contextlib
+import errno
+import fcntl
 import json
 import math
+import os
+import re
+import secrets
+import shutil
 import textwrap
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import NamedTuple
@@ -37,6 +49,8 @@ from ufl_frames.fem import energy, scales  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
 
 __all__ = [
+    "OutputFolder",
+    "WriteError",
     "describe_singularities",
     "frame_layout",
     "plot_convergence",
@@ -76,6 +90,81 @@ DESCRIBE_LIMIT = 6
 MANY_SINGULARITIES = 200
 
 
+# --- errors on rank 0, raised everywhere ----------------------------------------------
+
+
+class WriteError(OSError):
+    """Writing results failed (on this rank, or on rank 0 while this rank waited)."""
+
+
+def _on_root(comm: MPI.Comm, action) -> None:
+    """Run ``action()`` on rank 0 of ``comm``; its exception, if any, on every rank (collective).
+
+    Rank 0 re-raises its own exception; the other ranks raise :class:`WriteError` with
+    its message (a ``KeyboardInterrupt`` stays one). Returns only when rank 0 is done,
+    like a barrier.
+    """
+    failure = None
+    if comm.rank == 0:
+        try:
+            action()
+        except BaseException as e:  # noqa: BLE001  (re-raised below, on every rank)
+            failure = e
+    if comm.size > 1:
+        message = None
+        if failure is not None:
+            message = (isinstance(failure, KeyboardInterrupt), _one_line(failure))
+        message = comm.bcast(message, root=0)
+        if comm.rank != 0 and message is not None:
+            interrupted, text = message
+            raise KeyboardInterrupt(text) if interrupted else WriteError(text)
+    if failure is not None:
+        raise failure
+
+
+def _one_line(e: BaseException) -> str:
+    text = " ".join(str(e).split())
+    return text or type(e).__name__
+
+
+# --- checks on the arguments --------------------------------------------------------------
+
+
+def check_frame_field(q, what: str = "q") -> None:
+    """Raise ValueError unless ``q`` is a P1 frame field: a DOLFINx Function with 5
+    components per vertex on a 2D triangle mesh (what :func:`ufl_frames.fem.energy.frame_space`
+    makes)."""
+    if not isinstance(q, fem.Function):
+        raise ValueError(f"{what} must be a dolfinx.fem.Function, got {type(q).__name__}")
+    V = q.function_space
+    mesh = V.mesh
+    cell = mesh.topology.cell_type
+    if mesh.topology.dim != 2 or cell != dolfinx.mesh.CellType.triangle:
+        raise ValueError(f"{what} must live on a 2D triangle mesh, got {cell.name} cells")
+    if mesh.geometry.dim != 2:
+        raise ValueError(f"{what} must live on a planar mesh (geometric dimension 2), "
+                         f"got {mesh.geometry.dim}")
+    element = V.ufl_element()
+    shape = tuple(V.value_shape)
+    family = getattr(element, "family_name", "?")
+    degree = getattr(element, "embedded_superdegree", None)
+    if shape != (odeco.NUM_COEFFICIENTS,):
+        raise ValueError(f"{what} must have {odeco.NUM_COEFFICIENTS} components (the Odeco "
+                         f"coefficients), got value shape {shape}")
+    if family not in ("P", "Lagrange", "CG") or degree != 1 or getattr(
+            element, "discontinuous", False):
+        raise ValueError(f"{what} must be a continuous P1 (degree-1 Lagrange) field, got "
+                         f"{family} of degree {degree}")
+
+
+def _check_history(history) -> None:
+    if not isinstance(history, (list, tuple)) or not history:
+        raise ValueError("history must be a non-empty list of {'it', 'H', 'E'} entries")
+    for entry in history:
+        if not isinstance(entry, dict) or not {"it", "H", "E"} <= set(entry):
+            raise ValueError(f"history entries need the keys 'it', 'H' and 'E', got {entry!r}")
+
+
 # --- summary --------------------------------------------------------------------
 
 
@@ -93,12 +182,17 @@ def _json_default(value):
 def write_summary(path, data: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
     """Write ``data`` as indented JSON to ``path`` on rank 0 of ``comm`` (collective).
 
-    Non-finite floats are written as ``NaN``/``Infinity`` (Python's JSON dialect).
+    Non-finite floats are written as ``NaN``/``Infinity`` (Python's JSON dialect). A
+    failure (a value JSON cannot hold, a write error) is raised on every rank.
     """
-    if comm.rank == 0:
+    if not isinstance(data, dict):
+        raise ValueError(f"data must be a dict, got {type(data).__name__}")
+
+    def write():
         text = json.dumps(data, indent=2, default=_json_default)
         Path(path).write_text(text + "\n")
-    comm.Barrier()
+
+    _on_root(comm, write)
 
 
 # --- pointwise frame data ---------------------------------------------------------
@@ -134,6 +228,7 @@ def bracket_rms(q: fem.Function) -> fem.Function:
     the integrability energy sits. (On each cell [u,v] is linear in x; a value at
     one point, e.g. ``fem.Expression`` at the centroid, would miss part of it.)
     """
+    check_frame_field(q)
     mesh = q.function_space.mesh
     D0 = fem.functionspace(mesh, ("DG", 0))
     w = ufl.TestFunction(D0)
@@ -156,6 +251,7 @@ def field_functions(q: fem.Function) -> list[fem.Function]:
     vectors, the two branches scaled by their lengths, see :func:`_frames`);
     ``bracket_rms`` (DG0, :func:`bracket_rms`).
     """
+    check_frame_field(q)
     mesh = q.function_space.mesh
     V2 = fem.functionspace(mesh, ("Lagrange", 1, (2,)))
     lengths, u, v = _frames(q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS))
@@ -183,9 +279,17 @@ def write_field(directory, q: fem.Function, stem: str = "frames") -> list[Path]:
       the others it can be read back here without ADIOS2 or HDF5 (:func:`read_vtk`).
 
     The list is in that order (the ``.bp`` folder is one entry). Collective.
+    ``directory`` must exist.
     """
+    check_frame_field(q)
     directory = Path(directory)
     comm = q.function_space.mesh.comm
+    problem = None
+    if comm.rank == 0 and not directory.is_dir():
+        problem = f"output folder {str(directory)!r} does not exist"
+    problem = comm.bcast(problem, root=0)
+    if problem is not None:
+        raise FileNotFoundError(errno.ENOENT, problem)
     functions = field_functions(q)
     if dolfinx.io.has_adios2:
         paths = [directory / f"{stem}.bp"]
@@ -572,6 +676,7 @@ def plot_frames(
     :func:`ufl_frames.frames2d.singularities.locate_singularities`) are marked, smaller the
     more there are. Figure size: :func:`frame_layout`.
     """
+    check_frame_field(q)
     mesh = q.function_space.mesh
     comm = mesh.comm
     singularities = singularities or []
@@ -586,17 +691,21 @@ def plot_frames(
     else:
         points, rows, spacing = glyph_samples(q, glyphs_across)
     boundary = _gather_rows(comm, _boundary_segments(mesh))
-    if comm.rank == 0:
+
+    def draw():
         fig = _frames_figure(layout, points, rows, spacing, boundary, area, singularities,
                              isotropic)
         _save(fig, path, dpi)
-    comm.Barrier()
+
+    _on_root(comm, draw)
 
 
 def _save(fig, path, dpi) -> None:
     """Write and close a figure (tests replace it to inspect the figure)."""
-    fig.savefig(path, dpi=dpi)
-    _pyplot().close(fig)
+    try:
+        fig.savefig(path, dpi=dpi)
+    finally:
+        _pyplot().close(fig)
 
 
 def _frames_figure(layout, points, rows, spacing, boundary, area, singularities, isotropic):
@@ -673,9 +782,8 @@ def plot_convergence(
     ``history`` is :attr:`ufl_frames.solvers.SolveResult.history` (entries with
     ``"it"``, ``"H"``, ``"E"``). Collective over ``comm``.
     """
-    if comm.rank == 0:
-        _draw_convergence(path, history, title)
-    comm.Barrier()
+    _check_history(history)
+    _on_root(comm, lambda: _draw_convergence(path, history, title))
 
 
 def _draw_convergence(path, history, title):
@@ -701,8 +809,10 @@ def _draw_convergence(path, history, title):
             ax.set_xticks(np.arange(0, int(it[-1]) + 1))
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=200)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=200)
+    finally:
+        plt.close(fig)
 
 
 def describe_singularities(singularities: list[dict], limit: int = DESCRIBE_LIMIT) -> str:
@@ -720,3 +830,180 @@ def describe_singularities(singularities: list[dict], limit: int = DESCRIBE_LIMI
     counts = {k: quarters.count(k) for k in sorted(set(quarters), reverse=True)}
     parts = [f"{k:+d}/4: {n}" for k, n in counts.items()]
     return ", ".join(parts) + f", index sum {sum(quarters) / 4:g}"
+
+
+# --- the output folder, all or nothing ------------------------------------------------------
+
+#: The names a run writes into its output folder (regular expressions, whole names):
+#: with ``force``, :meth:`OutputFolder.commit` replaces exactly these, nothing else.
+OUTPUT_NAMES = (
+    r"summary\.json", r"frames\.bp", r"frames\.pvd", r"frames\d+\.pvtu", r"frames_p\d+_\d+\.vtu",
+    r"frames\.xdmf", r"frames\.h5", r"frames\.png", r"convergence\.png",
+    r"param\.png", r"param\.vtu",  # FrameField.write_param
+)
+_OUTPUT_NAME = re.compile("|".join(f"(?:{name})" for name in OUTPUT_NAMES))
+#: Seconds :meth:`OutputFolder.commit` waits for another run replacing files in the same
+#: folder (``--force``) before it gives up.
+LOCK_WAIT_S = 30.0
+
+
+def is_output_name(name: str) -> bool:
+    """Whether ``name`` is one the files a run writes (:data:`OUTPUT_NAMES`)."""
+    return _OUTPUT_NAME.fullmatch(name) is not None
+
+
+def output_target(path) -> Path:
+    """The folder ``path`` names: absolute, normalised (``a/..``), a link to a folder
+    resolved (the output goes to its target)."""
+    path = Path(path)
+    return path.resolve() if path.is_symlink() else Path(os.path.abspath(path))
+
+
+class OutputFolderBusy(OSError):
+    """The output folder changed under this run (another run wrote it meanwhile)."""
+
+
+class OutputFolder:
+    """A run's output folder, complete or untouched (collective over ``comm``).
+
+    :meth:`open` creates a fresh hidden folder next to ``path`` (same parent, so that a
+    rename moves it), where the run writes (:attr:`staging`); :meth:`commit` puts it in
+    place, :meth:`discard` removes it (and the parent folders :meth:`open` created).
+
+    * ``path`` does not exist: the staging folder is renamed to it in one step. If
+      another run created it meanwhile, nothing is replaced: :class:`OutputFolderBusy`.
+    * ``path`` is an empty folder: the files are renamed into it, ``summary.json`` last
+      (the folder itself stays: it may be a mount point or a shell's working folder).
+    * ``path`` has files and ``force``: the run's own names (:data:`OUTPUT_NAMES`) in it
+      are replaced, all of them (those of an earlier run that this one did not write
+      go too, so that two runs never mix), ``summary.json`` last; other files stay.
+      Entries are renamed, never opened, so a symbolic link (``frames.png`` → elsewhere)
+      is replaced itself and its target is not touched. Two runs replacing in the same
+      folder take turns (an ``flock`` on the folder).
+    * ``path`` has files without ``force``: :class:`OutputFolderBusy` (checked again
+      at the end: another run may have written it meanwhile).
+
+    A symbolic link to a folder as ``path`` stands for its target.
+    """
+
+    def __init__(self, path, force: bool = False, comm: MPI.Comm = MPI.COMM_WORLD):
+        self.path = Path(path)
+        self.force = force
+        self.comm = comm
+        self.staging: Path | None = None
+        self._created: list[Path] = []  # parent folders made by open(), innermost last
+
+    def _target(self) -> Path:
+        return output_target(self.path)
+
+    def open(self) -> Path:
+        """Create the staging folder; its path (on every rank). Collective."""
+        result = None
+
+        def make():
+            nonlocal result
+            target = self._target()
+            missing = []
+            parent = target.parent
+            while not parent.exists():
+                missing.append(parent)
+                parent = parent.parent
+            for folder in reversed(missing):
+                folder.mkdir()
+                self._created.append(folder)
+            token = f"{os.getpid():x}{secrets.token_hex(4)}"
+            staging = target.parent / f".{target.name}.ufl-frames-{token}.partial"
+            try:
+                staging.mkdir()
+            except OSError as e:
+                raise WriteError(e.errno, f"cannot create a folder in {str(target.parent)!r} "
+                                 f"({e.strerror})") from e
+            result = str(staging)
+
+        _on_root(self.comm, make)
+        self.staging = Path(self.comm.bcast(result, root=0))
+        return self.staging
+
+    def discard(self, here: bool = False) -> None:
+        """Remove the staging folder and the parents :meth:`open` created: on rank 0, or on
+        this rank if ``here`` (a rank that fails alone, before it aborts the job). Safe to
+        call more than once, from any thread, on one rank alone (not collective)."""
+        if self.comm.rank != 0 and not here:
+            return
+        staging, self.staging = self.staging, None
+        if staging is not None:
+            for _ in range(3):  # another thread or rank may still be adding files
+                shutil.rmtree(staging, ignore_errors=True)
+                if not os.path.lexists(staging):
+                    break
+                time.sleep(0.05)
+        while self._created:
+            try:
+                self._created.pop().rmdir()  # only if still empty
+            except OSError:
+                break
+
+    def commit(self) -> None:
+        """Put the staging folder's files in place (see the class); collective."""
+        _on_root(self.comm, self._publish)
+        self.staging = None
+        self._created = []
+
+    def _publish(self) -> None:
+        staging, target = self.staging, self._target()
+        if not os.path.lexists(target):
+            try:
+                os.rename(staging, target)
+                return
+            except OSError as e:
+                if e.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR):
+                    raise
+                # Created meanwhile: decided below, with the lock.
+        if not target.is_dir():
+            raise OutputFolderBusy(errno.EEXIST, f"output path {str(self.path)!r} was created "
+                                   "meanwhile and is not a folder; results discarded")
+        with _locked(target, self.path):
+            entries = os.listdir(target)
+            if not entries:  # moved in, not renamed over it: it may be someone's cwd
+                for name in sorted(os.listdir(staging), key=lambda n: n == "summary.json"):
+                    os.rename(staging / name, target / name)
+                staging.rmdir()
+                return
+            if not self.force:
+                raise OutputFolderBusy(
+                    errno.ENOTEMPTY, f"output folder {str(self.path)!r} was written by another "
+                    "run meanwhile; not replaced (results discarded; use --force to replace)"
+                )
+            old = target.parent / f"{staging.name[:-len('.partial')]}.old"
+            old.mkdir()
+            try:
+                for name in entries:
+                    if is_output_name(name):
+                        os.rename(target / name, old / name)
+                names = sorted(os.listdir(staging), key=lambda n: n == "summary.json")
+                for name in names:
+                    os.rename(staging / name, target / name)
+                staging.rmdir()
+            finally:
+                shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _locked(folder: Path, shown: Path):
+    """An exclusive ``flock`` on ``folder`` (waits up to :data:`LOCK_WAIT_S`)."""
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        deadline = time.monotonic() + LOCK_WAIT_S
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise OutputFolderBusy(
+                        errno.EBUSY, f"output folder {str(shown)!r} is being written by "
+                        "another run; results discarded") from None
+                time.sleep(0.1)
+        yield
+    finally:
+        os.close(fd)

@@ -220,7 +220,20 @@ class GaussNewtonModel:
         self._assemble(self.assembled, gnorm=gnorm, evaluation=self.problem.evaluation())
 
     # MatShell interface
+    #: Called with an exception raised in :meth:`mult` before it reaches PETSc (which turns
+    #: it into an error code): the solver keeps it to raise once TAO has stopped.
+    on_error = None
+
     def mult(self, mat, v, y):
+        """y = B v + shift·v (exceptions go to :attr:`on_error` first)."""
+        try:
+            self._mult(v, y)
+        except BaseException as exc:
+            if self.on_error is not None:
+                self.on_error(exc)
+            raise
+
+    def _mult(self, v, y):
         """y = B v + shift·v; the unshifted assembled part, whatever TAO did to the pre-matrix."""
         along = self.xhat.dot(v)
         self.work.waxpy(-along, self.xhat, v)

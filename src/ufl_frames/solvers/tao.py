@@ -52,6 +52,7 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.problem import FrameProblem  # noqa: E402
+from ufl_frames.petsc_options import TAO_TYPES  # noqa: E402
 from ufl_frames.solvers.hessian import GaussNewtonModel  # noqa: E402
 
 #: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
@@ -128,6 +129,9 @@ class SolveResult:
             return None
         return [entry["ksp_its"] for entry in self.history[1:]]
 
+
+#: TAO types that run on this problem (checked by the CLI before anything is meshed).
+SUPPORTED_TYPES = TAO_TYPES
 
 #: TAO types that get the Gauss–Newton Hessian of :class:`GaussNewtonModel`.
 SECOND_ORDER_TYPES = {"nls", "ntr", "ntl", "bnls", "bntr", "bntl", "tron"}
@@ -210,13 +214,16 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
 
     errors = []  # the first exception raised inside a callback, re-raised after TAO stops
 
+    def keep(exc: BaseException) -> None:
+        if not errors:
+            errors.append(exc)
+
     def guarded(callback):
         def call(*args):
             try:
                 return callback(*args)
             except BaseException as exc:
-                if not errors:
-                    errors.append(exc)
+                keep(exc)
                 raise
 
         return call
@@ -281,7 +288,8 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
         tao.setMonitor(guarded(record))
         tao.setFromOptions()
         if model is not None:
-            tao.getKSP().setMonitor(count_linear)
+            tao.getKSP().setMonitor(guarded(count_linear))
+            model.on_error = keep  # the shell's products, guarded too
 
         start = time.perf_counter()
         try:

@@ -1,0 +1,473 @@
+"""Bad input and failures of the ``ufl-frames`` command: one line, a status, nothing partial.
+
+Every case checks the exit status, exactly one ``ufl-frames: error:`` line on stderr, no
+traceback, and that nothing outside the output folder was touched (no hidden staging
+folder left behind). Subprocess tests (some under ``mpirun -n 2``) are marked ``serial``;
+the in-process ones also run under ``mpirun -n 2 python -m pytest -m "not serial"``.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc([])  # not pytest's command line
+
+from mpi4py import MPI  # noqa: E402
+
+from ufl_frames import cli, interrupts, io, petsc_options  # noqa: E402
+
+COMM = MPI.COMM_WORLD
+MPIRUN = Path(sys.prefix) / "bin" / "mpirun"
+COARSE = ["--mesh-size", "0.2", "--max-it", "3"]
+ERROR = "ufl-frames: error: "
+TRIANGLE = ("Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {0, 1, 0};\n"
+            "Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 1};\n"
+            "Curve Loop(1) = {1, 2, 3}; Plane Surface(1) = {1};\n")
+# Options that make a solve fail inside PETSc, after validation.
+MBO_FAILS = ["-mbo_ksp_type", "cg", "-mbo_pc_type", "none", "-mbo_ksp_max_it", "1",
+             "-mbo_ksp_rtol", "1e-30"]
+TAO_FAILS = ["-tao_nls_ksp_type", "richardson", "-tao_nls_pc_type", "none",
+             "-tao_nls_ksp_max_it", "1", "-tao_nls_ksp_error_if_not_converged"]
+
+needs_mpirun = pytest.mark.skipif(not MPIRUN.exists(), reason=f"no {MPIRUN}")
+
+
+def _env(**extra):
+    return {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": "1", **extra}
+
+
+def _command(mpi: bool = False) -> list[str]:
+    command = [sys.executable, "-m", "ufl_frames.cli"]
+    return [str(MPIRUN), "-n", "2", *command] if mpi else command
+
+
+def run_cli(*args, cwd, mpi=False, timeout=120, env=None):
+    """``python -m ufl_frames.cli ARGS`` in ``cwd`` (under ``mpirun -n 2`` if ``mpi``)."""
+    return subprocess.run([*_command(mpi), *map(str, args)], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout, env=env or _env(), check=False)
+
+
+def tree(path: Path) -> dict:
+    """Every entry under ``path`` (links not followed), with its mtime and size."""
+    return {str(p.relative_to(path)): (p.lstat().st_mtime_ns, p.lstat().st_size)
+            for p in sorted(path.rglob("*"))}
+
+
+def assert_one_line_error(proc, status, *words):
+    assert proc.returncode == status, (proc.returncode, proc.stderr)
+    errors = [line for line in proc.stderr.splitlines() if line.startswith(ERROR)]
+    assert len(errors) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "PETSC ERROR" not in proc.stderr, proc.stderr
+    for word in words:
+        assert word in errors[0], proc.stderr
+    return errors[0]
+
+
+def assert_nothing_partial(folder: Path):
+    leftovers = [p.name for p in folder.iterdir() if p.name.startswith(".")]
+    assert leftovers == [], leftovers
+
+
+@pytest.fixture
+def shared_tmp(tmp_path):
+    """rank 0's tmp_path on every rank."""
+    return Path(COMM.bcast(str(tmp_path), root=0))
+
+
+# --- PETSc options and arguments, refused before meshing (in-process) ------------------------
+
+
+@pytest.mark.parametrize(
+    "options, words",
+    [
+        (["-tao_type", "gpcg"], ["gpcg", "nls", "lmvm", "bncg"]),
+        (["-tao_type", "owlqn"], ["owlqn"]),
+        (["-tao_type", "ipm"], ["ipm"]),
+        (["-tao_type", "pdipm"], ["pdipm"]),
+        (["-tao_type", "almm"], ["almm"]),
+        (["-tao_type", "shell"], ["shell"]),
+        (["-tao_type", "python"], ["python"]),
+        (["-tao_type", "admm"], ["admm"]),
+        (["-tao_type", "lcl"], ["lcl"]),
+        (["-tao_type", "nosuch"], ["nosuch"]),
+        (["-tao_type"], ["-tao_type needs a value"]),
+        (["-tao_max_it", "0"], ["-tao_max_it"]),
+        (["-tao_max_it", "-5"], ["-tao_max_it"]),
+        (["-tao_max_it", "2.5"], ["-tao_max_it"]),
+        (["-tao_max_it", "99999999999999999999"], ["-tao_max_it"]),
+        (["-tao_nls_ksp_type", "nosuch"], ["KSP", "nosuch"]),
+        (["-tao_nls_pc_type", "nosuch"], ["PC", "nosuch"]),
+        (["-tao_ntr_ksp_type", "nosuch"], ["KSP"]),
+        (["-tao_bnk_pc_type", "nosuch"], ["PC"]),
+        (["-mbo_ksp_type", "gmress"], ["-mbo_ksp_type", "gmress"]),
+        (["-mbo_pc_type", "gamgg"], ["-mbo_pc_type"]),
+        (["-tao_ls_type", "nosuch"], ["line search"]),
+        (["-frames_hessian", "newton"], ["exact", "gauss_newton"]),
+        (["-frames_gn_damping", "-1"], ["-frames_gn_damping"]),
+        (["-frames_gn_damping", "abc"], ["-frames_gn_damping"]),
+        (["-frames_gn_damping_min", "nan"], ["-frames_gn_damping_min"]),
+        (["-frames_gn_damping_min", "inf"], ["-frames_gn_damping_min"]),
+        (["-tao_gttol", "-1"], ["-tao_gttol"]),
+    ],
+)
+def test_bad_petsc_options_are_usage_errors(options, words, shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    assert cli.main(["solve", "annulus", *COARSE, *options]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == (1 if COMM.rank == 0 else 0)
+    if err:
+        assert err[0].startswith(ERROR)
+        for word in words:
+            assert word in err[0], err[0]
+    assert "meshing" not in captured.out
+    assert list(shared_tmp.iterdir()) == []
+
+
+@pytest.mark.parametrize("value", ["99999999999999999999", str(2**31)])
+def test_max_it_out_of_range(value, shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    assert cli.main(["solve", "annulus", "--max-it", value]) == 2
+    if COMM.rank == 0:
+        assert "--max-it" in capsys.readouterr().err
+    assert list(shared_tmp.iterdir()) == []
+
+
+def test_supported_tao_types_pass_validation():
+    for tao_type in petsc_options.TAO_TYPES:
+        assert petsc_options.petsc_option_problem({"tao_type": tao_type}) is None
+    for name, value in [("tao_nls_ksp_type", "gmres"), ("mbo_pc_type", "gamg"),
+                        ("tao_ls_type", "armijo"), ("frames_hessian", "exact"),
+                        ("frames_gn_damping", "0"), ("tao_max_it", "7"),
+                        ("tao_bncg_type", "gd"), ("tao_monitor", None)]:
+        assert petsc_options.petsc_option_problem([(name, value)]) is None, name
+    # The last value of an option counts, as in PETSc.
+    assert petsc_options.petsc_option_problem([("tao_type", "gpcg"), ("tao_type", "lmvm")]) is None
+
+
+def test_run_solve_checks_the_options_database(shared_tmp):
+    from ufl_frames.bootstrap import options_scope
+
+    with options_scope([("tao_type", "pounders")]):
+        with pytest.raises(cli.InputError, match="pounders"):
+            cli.run_solve("annulus", mesh_size=0.2, out=shared_tmp / "o", quiet=True, comm=COMM)
+    assert list(shared_tmp.iterdir()) == []
+
+
+# --- failures after validation, in-process (collective) ---------------------------------------
+
+
+def test_write_failure_is_one_line_and_leaves_nothing(shared_tmp, capsys, monkeypatch):
+    def full_disk(path, history, title):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(io, "_draw_convergence", full_disk)
+    if COMM.rank == 0:
+        (shared_tmp / "keep").mkdir()
+    COMM.Barrier()
+    before = tree(shared_tmp)
+    out = shared_tmp / "o"
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", out]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [line for line in err if line.startswith(ERROR)]
+    assert len(errors) == (1 if COMM.rank == 0 else 0), err
+    if errors:
+        assert "No space left on device" in errors[0] and "writing the results" in errors[0]
+    assert tree(shared_tmp) == before  # no output folder, no staging folder
+
+
+def test_stale_staging_folder_does_not_block_a_rerun(shared_tmp):
+    stale = shared_tmp / ".o.ufl-frames-dead.partial"
+    if COMM.rank == 0:
+        stale.mkdir()
+        (stale / "frames.png").write_text("half")
+    COMM.Barrier()
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", shared_tmp / "o"]) == 0
+    assert (shared_tmp / "o" / "summary.json").is_file()
+    assert (stale / "frames.png").read_text() == "half"  # another run's: not ours to remove
+
+
+# --- the output folder ------------------------------------------------------------------------
+
+
+def test_force_replaces_only_own_names_and_never_follows_links(shared_tmp):
+    out, outside = shared_tmp / "o", shared_tmp / "outside"
+    if COMM.rank == 0:
+        out.mkdir()
+        outside.mkdir()
+        (outside / "target.png").write_text("precious")
+        (out / "frames.png").symlink_to(outside / "target.png")
+        (out / "notes.txt").write_text("mine")
+        (out / "frames_p7_000000.vtu").write_text("an earlier run on 8 processes")
+        (out / "summary.json").write_text("{}")
+    COMM.Barrier()
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", out, "--force"]) == 0
+    assert (outside / "target.png").read_text() == "precious"
+    assert not (out / "frames.png").is_symlink()
+    assert (out / "frames.png").read_bytes()[:4] == b"\x89PNG"
+    assert (out / "notes.txt").read_text() == "mine"
+    assert not (out / "frames_p7_000000.vtu").exists()  # the earlier run's: no mixing
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["files"]) | {"notes.txt"} == {p.name for p in out.iterdir()}
+    assert_nothing_partial(shared_tmp)
+
+
+def test_empty_and_linked_output_folders_are_kept(shared_tmp):
+    empty, real, link = shared_tmp / "empty", shared_tmp / "real", shared_tmp / "link"
+    if COMM.rank == 0:
+        empty.mkdir()
+        real.mkdir()
+        link.symlink_to(real)
+    COMM.Barrier()
+    inode = empty.stat().st_ino
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", empty]) == 0
+    assert empty.stat().st_ino == inode  # filled, not replaced (it may be a working folder)
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", link]) == 0
+    assert link.is_symlink() and (real / "summary.json").is_file()
+    assert_nothing_partial(shared_tmp)
+
+
+def test_root_output_folder_is_refused(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", "/", "--force"]) == 1
+    if COMM.rank == 0:
+        assert "root" in capsys.readouterr().err
+    assert list(shared_tmp.iterdir()) == []
+
+
+def test_output_folder_refuses_to_replace_another_runs_results(shared_tmp):
+    out = shared_tmp / "o"
+    first = io.OutputFolder(out, comm=COMM)
+    second = io.OutputFolder(out, comm=COMM)
+    for folder, text in ((first, "first"), (second, "second")):
+        staging = folder.open()
+        if COMM.rank == 0:
+            (staging / "summary.json").write_text(text)
+        COMM.Barrier()
+    first.commit()
+    with pytest.raises((io.OutputFolderBusy, io.WriteError), match="another run"):
+        second.commit()
+    second.discard()
+    assert (out / "summary.json").read_text() == "first"
+    assert_nothing_partial(shared_tmp)
+
+
+def test_output_folder_discard_removes_created_parents(shared_tmp):
+    folder = io.OutputFolder(shared_tmp / "a" / "b" / "o", comm=COMM)
+    folder.open()
+    folder.discard()
+    COMM.Barrier()
+    assert list(shared_tmp.iterdir()) == []
+
+
+def test_output_names():
+    for name in ("summary.json", "frames.bp", "frames000000.pvtu", "frames_p12_000000.vtu",
+                 "frames.png", "convergence.png", "frames.pvd"):
+        assert io.is_output_name(name), name
+    for name in ("notes.txt", "frames.png.bak", "my_frames.png", "frames_px_000000.vtu"):
+        assert not io.is_output_name(name), name
+
+
+# --- library checks -----------------------------------------------------------------------------
+
+
+def test_io_refuses_what_is_not_a_frame_field(shared_tmp):
+    import dolfinx
+    import dolfinx.fem as fem
+
+    mesh = dolfinx.mesh.create_unit_square(COMM, 2, 2)
+    cube = dolfinx.mesh.create_unit_cube(COMM, 1, 1, 1)
+    quads = dolfinx.mesh.create_unit_square(COMM, 2, 2, dolfinx.mesh.CellType.quadrilateral)
+    bad = {
+        "not a Function": mesh,
+        "components": fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (2,)))),
+        "P1": fem.Function(fem.functionspace(mesh, ("Lagrange", 2, (5,)))),
+        "continuous": fem.Function(fem.functionspace(mesh, ("DG", 1, (5,)))),
+        "triangle": fem.Function(fem.functionspace(quads, ("Lagrange", 1, (5,)))),
+        "2D": fem.Function(fem.functionspace(cube, ("Lagrange", 1, (5,)))),
+    }
+    for words, q in bad.items():
+        for call, first in ((io.write_field, shared_tmp), (io.plot_frames, shared_tmp / "f.png"),
+                            (io.bracket_rms, None)):
+            with pytest.raises(ValueError, match=words.split()[-1]):
+                call(q) if first is None else call(first, q)
+    with pytest.raises(ValueError, match="history"):
+        io.plot_convergence(shared_tmp / "c.png", [], comm=COMM)
+    with pytest.raises(ValueError, match="dict"):
+        io.write_summary(shared_tmp / "s.json", [1, 2], comm=COMM)
+    good = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (5,))))
+    io.check_frame_field(good)
+    with pytest.raises(FileNotFoundError):
+        io.write_field(shared_tmp / "missing", good)
+    assert list(shared_tmp.iterdir()) == []
+
+
+# --- subprocesses ---------------------------------------------------------------------------------
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["-tao_type", "pounders"], ["pounders"]),  # segfaulted in TAO
+        (["-tao_type", "ssils"], ["ssils"]),  # segfaulted in TAO
+        (["-tao_nls_pc_type", "nosuch"], ["nosuch"]),
+        (["--max-it", "99999999999999999999"], ["--max-it"]),
+    ],
+)
+def test_cli_refuses_bad_options_before_meshing(args, words, tmp_path):
+    proc = run_cli("solve", "annulus", "--mesh-size", "0.2", *args, cwd=tmp_path)
+    assert_one_line_error(proc, 2, *words)
+    assert "meshing" not in proc.stdout
+    assert "There are" not in proc.stderr  # no PETSc report of options left unused
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.serial
+def test_cli_non_utf8_arguments(tmp_path):
+    bad = os.fsdecode(b"\xff.geo")
+    for args in (["solve", bad], ["solve", "annulus", "--out", os.fsdecode(b"o\xff")]):
+        proc = subprocess.run([*_command(), *args], cwd=tmp_path, capture_output=True,
+                              timeout=60, env=_env(), check=False)
+        proc.stderr = proc.stderr.decode("utf-8", "backslashreplace")
+        assert_one_line_error(proc, 2, "UTF-8")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("script", ["Exit;", "Exit(3);", 'Include "inner.geo";'])
+def test_cli_geo_that_calls_exit(script, tmp_path):
+    (tmp_path / "inner.geo").write_text(TRIANGLE + "Exit;\n")
+    (tmp_path / "shape.geo").write_text(TRIANGLE + "// Exit; in a comment is fine\n" + script)
+    before = tree(tmp_path)
+    proc = run_cli("solve", "shape.geo", *COARSE, cwd=tmp_path)
+    assert_one_line_error(proc, 1, "Exit")
+    assert tree(tmp_path) == before
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize(
+    "options, words",
+    [(MBO_FAILS, ["MBO", "KSP reason"]), (TAO_FAILS, ["TAO", "PETSc error"])],
+    ids=["mbo", "tao"],
+)
+def test_cli_solver_failures(options, words, tmp_path):
+    proc = run_cli("solve", "annulus", *COARSE, "-q", "--out", "o", *options, cwd=tmp_path)
+    assert_one_line_error(proc, 1, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.serial
+def test_cli_debug_variable_shows_the_traceback(tmp_path):
+    proc = run_cli("solve", "annulus", *COARSE, "-q", *TAO_FAILS, cwd=tmp_path,
+                   env=_env(UFL_FRAMES_DEBUG="1"))
+    assert proc.returncode == 1
+    assert "Traceback" in proc.stderr
+    assert sum(line.startswith(ERROR) for line in proc.stderr.splitlines()) == 1
+
+
+@pytest.mark.serial
+def test_cli_unwritable_output(tmp_path):
+    proc = run_cli("solve", "annulus", *COARSE, "-q", "--out", "/proc/ufl-frames-test",
+                   cwd=tmp_path)
+    assert_one_line_error(proc, 1, "/proc")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.serial
+def test_cli_two_runs_to_one_new_folder(tmp_path):
+    args = [*_command(), "solve", "annulus", *COARSE, "-q", "--out", "same"]
+    procs = [subprocess.Popen(args, cwd=tmp_path, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=_env()) for _ in range(2)]
+    results = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
+    for p in procs:
+        p.stdout.close()
+        p.stderr.close()
+    # One wins; the other is refused, at the end ("another run") or, if it started after
+    # the first had finished, at the start ("not empty").
+    assert sorted(status for status, _ in results) == [0, 1], results
+    for status, err in results:
+        if status == 1:
+            assert "another run" in err or "not empty" in err, err
+            assert sum(line.startswith(ERROR) for line in err.splitlines()) == 1
+    summary = json.loads((tmp_path / "same" / "summary.json").read_text())
+    assert set(summary["files"]) == {p.name for p in (tmp_path / "same").iterdir()}
+    assert_nothing_partial(tmp_path)
+
+
+def _interrupt(args, wait_for, signum, cwd, mpi=False, delay=0.0):
+    """Start the CLI, send ``signum`` once ``wait_for`` is on stdout; (status, stderr, s)."""
+    proc = subprocess.Popen([*_command(mpi), "solve", *args], cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=_env())
+    try:
+        for line in proc.stdout:
+            if wait_for in line:
+                time.sleep(delay)
+                proc.send_signal(signum)
+                break
+        else:
+            pytest.fail(f"no {wait_for!r} line: {proc.stderr.read()}")
+        sent = time.monotonic()
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, err, time.monotonic() - sent
+
+
+PIANO = ["piano", "--mesh-size", "0.03", "--max-it", "500", "--out", "o"]
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize(
+    "wait_for, signum, stage",
+    # The stage is checked where the line waited for is in it (MBO may end first).
+    [("  it    2 ", signal.SIGINT, "TAO"), ("MBO initial field", signal.SIGTERM, ""),
+     ("meshing", signal.SIGINT, "")],
+    ids=["tao-sigint", "mbo-sigterm", "meshing-sigint"],
+)
+def test_cli_interrupt(wait_for, signum, stage, tmp_path):
+    args = PIANO if wait_for != "meshing" else ["piano", "--mesh-size", "0.004", "--out", "o"]
+    status, err, seconds = _interrupt(args, wait_for, signum, tmp_path,
+                                      delay=0.3 if wait_for == "meshing" else 0.0)
+    proc = subprocess.CompletedProcess([], status, "", err)
+    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted", signum.name, stage)
+    assert seconds < interrupts.INTERRUPT_GRACE_S + 5
+    assert list(tmp_path.iterdir()) == []
+
+
+# --- under mpirun -n 2 ------------------------------------------------------------------------
+
+
+@pytest.mark.serial
+@needs_mpirun
+@pytest.mark.parametrize(
+    "args, status, words",
+    [(["-tao_type", "gpcg"], 2, ["gpcg"]),
+     (TAO_FAILS, 1, ["TAO", "PETSc error"]),
+     (["--out", "/proc/ufl-frames-test"], 1, ["/proc"])],
+    ids=["usage", "tao-fails", "unwritable"],
+)
+def test_mpirun_failures_are_reported_once(args, status, words, tmp_path):
+    proc = run_cli("solve", "annulus", *COARSE, "-q", *args, cwd=tmp_path, mpi=True)
+    assert_one_line_error(proc, status, *words)
+    assert "MPI_Abort" not in proc.stderr and "aborting" not in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.serial
+@needs_mpirun
+def test_mpirun_interrupt(tmp_path):
+    status, err, _ = _interrupt(PIANO, "  it    2 ", signal.SIGINT, tmp_path, mpi=True)
+    proc = subprocess.CompletedProcess([], status, "", err)
+    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted")
+    assert list(tmp_path.iterdir()) == []
