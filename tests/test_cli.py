@@ -125,6 +125,18 @@ def test_piano_lists_singularities(shared_tmp):
         assert set(s) == {"index", "x", "y"}
 
 
+def test_param_adds_the_map(shared_tmp):
+    """--param: param.png, param.vtu and the map's measures in the summary (the annulus
+    field is cut once, from the inner to the outer circle, and nothing flips)."""
+    summary = cli.run_solve("annulus", mesh_size=0.2, max_it=20, out=shared_tmp / "p",
+                            quiet=True, comm=COMM, param=True, quad_size=0.2)
+    assert {"param.png", "param.vtu"} <= set(summary["files"])
+    assert {p.name for p in (shared_tmp / "p").iterdir()} >= {"param.png", "param.vtu"}
+    found = summary["param"]
+    assert found["cuts"] == 1 and found["flipped_triangles"] == 0
+    assert 0 < found["misfit"] < 0.2
+
+
 def test_progress_lines(shared_tmp, capsys):
     cli.run_solve("annulus", mesh_size=0.2, max_it=3, out=shared_tmp / "o", comm=COMM)
     lines = capsys.readouterr().out.splitlines()

@@ -161,6 +161,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help=f"bound on l_max/l_min of non-isotropic frames (default "
                        f"{DEFAULT_MAX_ASPECT:g}; 'inf' for none: the energy then has degenerate "
                        "minimisers where a branch collapses)")
+    solve.add_argument("--param", action="store_true",
+                       help="also integrate the field into a seamless parametrisation (U, V): "
+                       "param.png (integer iso-lines), param.vtu and 'param' in summary.json")
+    solve.add_argument("--quad-size", type=_positive_float, default=None, metavar="S",
+                       help="with --param: the quad edge length the integer iso-lines of U and "
+                       "V outline (default: about one quad per 8 triangles)")
     solve.add_argument("--free-singularities", action="store_true",
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "
@@ -335,8 +341,12 @@ def run_solve(
     free_singularities: bool = False,
     size_factor: float = 1.0,
     max_triangles: float | None = None,
+    param: bool = False,
+    quad_size: float | None = None,
 ) -> dict:
-    """Mesh → MBO → TAO → singularities → files in ``out``; return the summary (all ranks).
+    """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
+    :meth:`~ufl_frames.pipeline.FrameField.parametrise`) → files in ``out``; return the
+    summary (all ranks).
 
     Collective over ``comm`` (default ``MPI.COMM_WORLD``). Raises :class:`InputError`
     (for a :class:`ufl_frames.geometry.GeometryError`, a bad parameter or PETSc option in
@@ -422,12 +432,22 @@ def run_solve(
               "is too coarse for the field somewhere; try a smaller --mesh-size",
               file=sys.stderr)
 
+    if param:
+        with _failures("the parametrisation"):
+            quality = field.parametrise(quad_size=quad_size)
+        say(f"parametrisation: misfit {quality['misfit']:.4f}, "
+            f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
+            f"of length {quality['cut_length']:.3g}")
+        interrupts.checkpoint(comm)
+
     folder = io.OutputFolder(out, force=force, comm=comm)
     try:
         with _failures(f"writing the results to {str(out)!r}", writing=True):
             staging = folder.open()
             interrupts.attach_output(folder)
             files = field.write(staging, label=Path(geometry).stem, tao_type=tao_type)
+            if param:
+                files += field.write_param(staging, label=Path(geometry).stem)
             files.append("summary.json")
             record = field.summary()
             summary = {
@@ -691,6 +711,8 @@ def main(argv: list[str] | None = None) -> int:
                         free_singularities=args.free_singularities,
                         size_factor=args.size_factor,
                         max_triangles=args.max_triangles,
+                        param=args.param,
+                        quad_size=args.quad_size,
                     )
                 except Exception as e:
                     watch.stage = "reporting the failure"
