@@ -114,35 +114,40 @@ class FrameManifold:
 
     # --- tangent spaces ----------------------------------------------------------------
 
-    def tangent_basis(self, rows: np.ndarray, gradient: np.ndarray | None = None) -> np.ndarray:
+    def tangent_basis(self, rows: np.ndarray, gradient: np.ndarray | None = None,
+                      held: np.ndarray | None = None) -> np.ndarray:
         """Orthonormal basis (N, 5, 3) of the pointwise tangent space at ``rows`` (on 𝓜).
 
         Columns e_s (total length), e_d (length difference), rotation; zero where the
         direction is absent: rotation at fixed-orientation vertices, e_d for isotropic
         frames and for frames on the aspect bound that ``gradient`` pushes outwards
-        (see :func:`ufl_frames.frames2d.aspect.active_bound`). Same in q and in x.
+        (see :func:`ufl_frames.frames2d.aspect.active_bound`; ``held``: rows kept on the
+        bound whatever the gradient). Same in q and in x.
         """
         c = self.constraints
         basis = odeco.tangent_basis(rows, max_aspect=c.max_aspect, gradient=gradient,
-                                    on_variety=True)
+                                    on_variety=True, held=held)
         basis[c.boundary, :, 2] = 0.0  # orientation held: no rotation
         if c.isotropic:
             basis[:, :, 1] = 0.0
         return basis
 
     def tangent_project(self, rows: np.ndarray, dq: np.ndarray,
-                        gradient: np.ndarray | None = None) -> np.ndarray:
+                        gradient: np.ndarray | None = None,
+                        held: np.ndarray | None = None) -> np.ndarray:
         """Step 2 of note §3: the pointwise tangent part of ``dq`` at ``rows``; the active
-        aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)."""
-        basis = self.tangent_basis(rows, dq if gradient is None else gradient)
+        aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)
+        and ``held``."""
+        basis = self.tangent_basis(rows, dq if gradient is None else gradient, held)
         return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
 
-    def riemannian_gradient(self, rows: np.ndarray, gradient_x: np.ndarray) -> np.ndarray:
+    def riemannian_gradient(self, rows: np.ndarray, gradient_x: np.ndarray,
+                            held: np.ndarray | None = None) -> np.ndarray:
         """grad f on 𝓜 at ``rows`` from the Euclidean gradient ``gradient_x`` = ∂f/∂x (local
         rows): pointwise tangent part, then the component along x removed (the sphere's
         tangent). Owned rows, in x."""
         n = self.owned
-        tangent = self.tangent_project(rows, gradient_x)[:n]
+        tangent = self.tangent_project(rows, gradient_x, held=held)[:n]
         x = self.to_x(rows)
         return tangent - (self.inner(tangent, x) / self.inner(x, x)) * x
 

@@ -57,6 +57,10 @@ class FrameProblem:
     dirichlet: fem.Form
     #: The domain's area, Σ_v m_v.
     area: float
+    #: Local rows held on the aspect bound whatever the gradient says (None: the gradient
+    #: decides), set by a solver for the current iterate (the Newton model's anti-zigzag
+    #: rule); :meth:`riemannian_gradient` and the Newton model's tangent basis use it.
+    held: np.ndarray | None = field(default=None, repr=False)
     #: Counts the changes of q made here (retractions); keys the cached evaluation.
     _version: int = field(default=0, repr=False)
     _evaluated: tuple | None = field(default=None, repr=False)  # (version, Evaluation)
@@ -115,11 +119,11 @@ class FrameProblem:
         through PETSc, which counts every change), and :meth:`evaluation` reuses its
         assembly while q is unchanged. Only for code that changes q through
         :meth:`set_from_x` and :meth:`retract` alone, such as the TAO callbacks."""
-        self._tracking, self._synced, self._evaluated = True, None, None
+        self._tracking, self._synced, self._evaluated, self.held = True, None, None, None
         try:
             yield self
         finally:
-            self._tracking, self._synced, self._evaluated = False, None, None
+            self._tracking, self._synced, self._evaluated, self.held = False, None, None, None
 
     def _mark_synced(self, x: PETSc.Vec) -> None:
         if self._tracking:
@@ -186,7 +190,7 @@ class FrameProblem:
         """g ← the gradient of H on 𝓜 at q, in the scaled unknowns x (steps 1–2); returns H."""
         evaluation = self.evaluation()
         g.getArray()[:] = self.manifold.riemannian_gradient(
-            self.rows, evaluation.gradient_x).ravel()
+            self.rows, evaluation.gradient_x, held=self.held).ravel()
         return evaluation.energy
 
 
