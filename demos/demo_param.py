@@ -91,15 +91,12 @@ exact = energy.interpolate_frames(
     V, lambda x: (np.hypot(x[0], x[1]), np.hypot(x[0], x[1]), np.arctan2(x[1], x[0])))
 ring = FrameField(domain=annulus, q=exact, isotropic=True)
 report("annulus, exact field", ring.parametrise(quad_size=0.1))
-ring.write_param(out, "annulus, exact field")
+ring.write_param(out, "annulus, exact field", stem="param_annulus")
 if comm.rank == 0:
     uv, s = ring.parametrisation.uv, ring.parametrisation.scale
     say(f"  U spans {np.ptp(uv[:, 0]):.4f}, V spans {np.ptp(uv[:, 1]):.4f}; with the scale "
         f"s = {s:.4g}: s ln 2 = {s * np.log(2):.4f}, 2π s = {2 * np.pi * s:.4f} "
         "(the two spans, in some order)")
-    os.replace(out / "param.png", out / "param_annulus.png")
-    os.replace(out / "param.vtu", out / "param_annulus.vtu")
-comm.Barrier()
 # -
 
 # ## The piano: MBO field against the optimised field
@@ -112,20 +109,12 @@ comm.Barrier()
 piano = geometry.piano(comm, h)
 field = FrameField.initial(piano, isotropic=False)
 report("piano, MBO field", field.parametrise())
-field.write_param(out, "piano, MBO field")
-if comm.rank == 0:
-    os.replace(out / "param.png", out / "param_piano_mbo.png")
-    os.replace(out / "param.vtu", out / "param_piano_mbo.vtu")
-comm.Barrier()
+field.write_param(out, "piano, MBO field", stem="param_piano_mbo")
 result = field.solve(max_it=20 if CI else 500)
 say(f"solve: {result.converged_reason} after {result.iterations} iterations, "
     f"H {result.H_initial:.4e} -> {result.H_final:.4e}")
 report("piano, optimised field", field.parametrise())
-field.write_param(out, "piano, optimised non-isotropic field")
-if comm.rank == 0:
-    os.replace(out / "param.png", out / "param_piano_optimised.png")
-    os.replace(out / "param.vtu", out / "param_piano_optimised.vtu")
-comm.Barrier()
+field.write_param(out, "piano, optimised non-isotropic field", stem="param_piano_optimised")
 # -
 
 # The figures `param_*.png` show the integer iso-lines of U (blue) and V (red) and the

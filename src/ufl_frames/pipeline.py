@@ -133,18 +133,18 @@ class FrameField:
         self.param_quality = comm.bcast(result, root=0)
         return self.param_quality
 
-    def write_param(self, out, label: str) -> list[str]:
-        """``param.png`` and ``param.vtu`` of the last :meth:`parametrise` into ``out``."""
+    def write_param(self, out, label: str, stem: str = "param") -> list[str]:
+        """``<stem>.png`` and ``<stem>.vtu`` of the last :meth:`parametrise` into ``out``."""
         from ufl_frames.param.figures import plot_param, write_param_vtu
 
         if self.domain.comm.rank == 0:
             quality = self.param_quality
             title = (f"{label}: iso-lines of U, V (misfit {quality['misfit']:.3g}, "
                      f"{quality['flipped_triangles']} flipped, {quality['cuts']} cuts)")
-            plot_param(Path(out) / "param.png", self.parametrisation, title=title)
-            write_param_vtu(Path(out) / "param.vtu", self.parametrisation)
+            plot_param(Path(out) / f"{stem}.png", self.parametrisation, title=title)
+            write_param_vtu(Path(out) / f"{stem}.vtu", self.parametrisation)
         self.domain.comm.Barrier()
-        return ["param.png", "param.vtu"]
+        return [f"{stem}.png", f"{stem}.vtu"]
 
     def summary(self) -> dict:
         """The field's record for ``summary.json`` (JSON types; collective): the kind of
