@@ -172,3 +172,16 @@ def test_bad_input_is_refused():
     q = odeco.frames_to_q(np.ones((x.shape[0], 2)), np.zeros(x.shape[0]))
     with pytest.raises(ValueError, match="more than two triangles"):
         cut.cut_mesh(x, np.concatenate([cells, cells[:1]]), q)
+
+
+def test_a_singularity_on_the_boundary_still_gives_a_map():
+    """A field turning by a quarter around a boundary point: no interior singular vertex
+    to cut to, so the turn shows up as boundary edges whose constant coordinate
+    conflicts; the map still exists, finite, and its misfit says it is poor."""
+    x, cells = grid(10, 10, -1, 1, 0, 1)
+    theta = np.arctan2(x[:, 1] + 1e-3, x[:, 0] + 0.05)
+    q = odeco.frames_to_q(np.ones((x.shape[0], 2)), theta / 4)
+    mesh = cut.cut_mesh(x, cells, q)
+    assert mesh.singular.size == 0 and mesh.paths == 0
+    found = measures.quality(seamless.integrate(mesh))
+    assert np.isfinite(found["misfit"]) and found["misfit"] > 0.05
