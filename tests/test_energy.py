@@ -382,3 +382,27 @@ def test_frame_space_rejects_non_planar_meshes():
         energy.frame_space(dolfinx.mesh.create_unit_interval(comm, 4))
     V = energy.frame_space(dolfinx.mesh.create_unit_square(comm, 2, 2))
     assert V.dofmap.index_map_bs == 5
+
+
+def test_forms_refuse_what_is_not_a_p1_frame_field():
+    """Tetrahedra, quadrilaterals, P2 geometry, or a q that is not P1 with 5 components:
+    one clear ValueError (before: tets gave a number, a DG0 or P1x3 q an IndexError)."""
+    import dolfinx.fem as fem
+    import dolfinx.mesh
+
+    comm = MPI.COMM_WORLD
+    tets = dolfinx.mesh.create_unit_cube(comm, 2, 2, 2)
+    with pytest.raises(ValueError, match="planar 2D"):
+        energy.frame_space(tets)
+    with pytest.raises(ValueError, match="planar 2D"):
+        energy.integrability_energy(fem.Function(fem.functionspace(tets, ("Lagrange", 1, (5,)))))
+    quads = dolfinx.mesh.create_unit_square(comm, 2, 2, dolfinx.mesh.CellType.quadrilateral)
+    with pytest.raises(ValueError, match="triangles"):
+        energy.frame_space(quads)
+    square = dolfinx.mesh.create_unit_square(comm, 2, 2)
+    for element in (("DG", 0, (5,)), ("Lagrange", 1, (3,)), ("Lagrange", 1)):
+        q = fem.Function(fem.functionspace(square, element))
+        with pytest.raises(ValueError, match="continuous P1 function with 5 components"):
+            energy.integrability_energy(q)
+    with pytest.raises(ValueError, match="dolfinx Function"):
+        energy.lie_bracket(np.zeros(5))

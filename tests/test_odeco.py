@@ -637,3 +637,17 @@ def test_tangent_project_is_idempotent_for_badly_conditioned_normals():
         for point in (q, odeco.project(q)):
             t = odeco.tangent_project(point, dq)
             np.testing.assert_allclose(odeco.tangent_project(point, t), t, atol=1e-14)
+
+
+def test_complex_and_overflowing_input_is_refused():
+    """Complex coefficients would lose their imaginary part, huge ones overflow to Inf:
+    both are refused with a clear message instead of returning Inf/NaN."""
+    q = odeco.frames_to_q(np.ones((2, 2)), np.zeros(2))
+    with pytest.raises(ValueError, match="real"):
+        odeco.project(q + 1j)
+    with pytest.raises(ValueError, match="real"):
+        odeco.frames_to_q(np.ones((2, 2)) + 1j, np.zeros(2))
+    with pytest.raises(ValueError, match="overflow"):
+        odeco.frames_to_q(np.full((1, 2), 1e308), np.zeros(1))
+    with pytest.raises(ValueError, match="overflow"):
+        odeco.variety_residual(q * 1e155)

@@ -28,13 +28,42 @@ from ufl_frames.frames2d import odeco  # noqa: E402
 from ufl_frames.frames2d.bracket import BRACKET_ENTRIES  # noqa: E402
 
 
-def frame_space(mesh) -> fem.FunctionSpace:
-    """The P1 space of frame fields: 5 Odeco coefficients per vertex."""
+def check_frame_mesh(mesh) -> None:
+    """Raise ValueError unless ``mesh`` is a planar mesh of straight (affine) triangles."""
+    import dolfinx.mesh
+
     if mesh.topology.dim != 2 or mesh.geometry.dim != 2:
         raise ValueError(
             f"frame fields need a planar 2D mesh, got topological dimension "
             f"{mesh.topology.dim} in {mesh.geometry.dim}D"
         )
+    if mesh.topology.cell_type != dolfinx.mesh.CellType.triangle:
+        raise ValueError(f"frame fields need triangles, got {mesh.topology.cell_type.name}")
+    if mesh.geometry.cmaps[0].degree != 1:
+        raise ValueError(f"frame fields need straight triangles (geometry degree 1), got "
+                         f"degree {mesh.geometry.cmaps[0].degree}")
+
+
+def check_frame_function(q) -> None:
+    """Raise ValueError unless ``q`` is a continuous P1 field of the 5 Odeco coefficients
+    on a mesh that :func:`check_frame_mesh` accepts (what every form here assumes)."""
+    V = getattr(q, "function_space", None)
+    if V is None:
+        raise ValueError(f"q must be a dolfinx Function, got {type(q).__name__}")
+    check_frame_mesh(V.mesh)
+    element = V.ufl_element()
+    if (V.dofmap.index_map_bs != odeco.NUM_COEFFICIENTS or element.embedded_superdegree != 1
+            or getattr(element, "discontinuous", False)):
+        raise ValueError(
+            f"q must be a continuous P1 function with {odeco.NUM_COEFFICIENTS} components "
+            f"(see frame_space), got block size {V.dofmap.index_map_bs}, degree "
+            f"{element.embedded_superdegree}"
+            + (", discontinuous" if getattr(element, "discontinuous", False) else ""))
+
+
+def frame_space(mesh) -> fem.FunctionSpace:
+    """The P1 space of frame fields: 5 Odeco coefficients per vertex (straight triangles)."""
+    check_frame_mesh(mesh)
     return fem.functionspace(mesh, ("Lagrange", 1, (odeco.NUM_COEFFICIENTS,)))
 
 
@@ -52,7 +81,8 @@ def interpolate_frames(V, f, name: str = "q") -> fem.Function:
 
 
 def lie_bracket(q) -> ufl.core.expr.Expr:
-    """[u, v] as a UFL vector expression (note eq. 10)."""
+    """[u, v] as a UFL vector expression (note eq. 10); ``q`` a frame field (checked)."""
+    check_frame_function(q)
     grad_q = ufl.grad(q)
     components = []
     for i in range(2):

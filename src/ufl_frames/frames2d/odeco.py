@@ -73,8 +73,16 @@ _CHUNK_ROWS = 65536
 # --- input checking -------------------------------------------------------------
 
 
+def _real(x, name: str) -> np.ndarray:
+    """``x`` as float64; complex input is refused (its imaginary part would be dropped)."""
+    x = np.asarray(x)
+    if np.iscomplexobj(x):
+        raise ValueError(f"{name} must be real, got complex values")
+    return np.asarray(x, dtype=np.float64)
+
+
 def _check_q(q, name="q") -> np.ndarray:
-    q = np.asarray(q, dtype=np.float64)
+    q = _real(q, name)
     if q.ndim != 2 or q.shape[1] != 5:
         raise ValueError(f"{name} must have shape (N, 5), got {q.shape}")
     if not np.all(np.isfinite(q)):
@@ -121,19 +129,23 @@ def frames_to_q(lengths, angles) -> np.ndarray:
     ``lengths`` (N, 2) holds (l1, l2): l1 along (cos t, sin t), l2 along (−sin t, cos t);
     ``angles`` (N,) holds t. Returns q of shape (N, 5).
     """
-    lengths = np.asarray(lengths, dtype=np.float64)
-    angles = np.asarray(angles, dtype=np.float64)
+    lengths = _real(lengths, "lengths")
+    angles = _real(angles, "angles")
     if lengths.ndim != 2 or lengths.shape[1] != 2:
         raise ValueError(f"lengths must have shape (N, 2), got {lengths.shape}")
     if angles.shape != (lengths.shape[0],):
         raise ValueError(f"angles must have shape ({lengths.shape[0]},), got {angles.shape}")
     if not (np.all(np.isfinite(lengths)) and np.all(np.isfinite(angles))):
         raise ValueError("lengths and angles must be finite")
-    s = lengths[:, 0] + lengths[:, 1]
-    d = lengths[:, 0] - lengths[:, 1]
-    return _q_from_parameters(
-        s, d, np.cos(2 * angles), np.sin(2 * angles), np.cos(4 * angles), np.sin(4 * angles)
-    )
+    with np.errstate(over="ignore", invalid="ignore"):
+        s = lengths[:, 0] + lengths[:, 1]
+        d = lengths[:, 0] - lengths[:, 1]
+        q = _q_from_parameters(
+            s, d, np.cos(2 * angles), np.sin(2 * angles), np.cos(4 * angles), np.sin(4 * angles)
+        )
+    if not np.all(np.isfinite(q)):
+        raise ValueError("lengths too large: the coefficients overflow (scale the frames down)")
+    return q
 
 
 def q_to_frames(q) -> tuple[np.ndarray, np.ndarray]:
@@ -164,7 +176,11 @@ def branch_vectors(q) -> tuple[np.ndarray, np.ndarray]:
 def variety_residual(q) -> np.ndarray:
     """The three variety equations g_m(q) = q^T A_m q (note eq. 3), shape (N, 3)."""
     q = _check_q(q)
-    return np.einsum("ni,mij,nj->nm", q, VARIETY_MATRICES, q)
+    with np.errstate(over="ignore", invalid="ignore"):
+        residual = np.einsum("ni,mij,nj->nm", q, VARIETY_MATRICES, q)
+    if not np.all(np.isfinite(residual)):
+        raise ValueError("q too large: its variety residual overflows (scale q down)")
+    return residual
 
 
 def tangent_project(q, dq) -> np.ndarray:
