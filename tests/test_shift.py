@@ -49,6 +49,7 @@ from ufl_frames import geometry, solvers
 from ufl_frames.bootstrap import petsc_defaults
 from ufl_frames.fem import energy
 from ufl_frames.solvers import mbo
+from ufl_frames.solvers.tao import tao_callbacks
 
 COMM = MPI.COMM_WORLD
 RTOL = 1e-11  # round-off of a few sparse products against |B| ~ μ
@@ -85,7 +86,7 @@ class _Tao:
 
 
 def model_at(problem, exact):
-    """A model set up as ``solvers._solve`` does, then updated at the start as TAO does."""
+    """A model set up as ``solvers.tao._solve`` does, then updated at the start as TAO does."""
     x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
     problem.retract()
     problem.write_x(x)
@@ -247,7 +248,7 @@ def test_tao_perturbed_newton_step(tao_type):
     """TAO with the perturbation forced: its step d solves (B + pert I) d = −g.
 
     One iteration of ``nls`` / ``bnls`` from the MBO field (Gauss–Newton, non-isotropic),
-    set up as ``solvers._solve`` does, with ``-tao_*_sval`` = μ (so pert = μ from the first
+    set up as ``solvers.tao._solve`` does, with ``-tao_*_sval`` = μ (so pert = μ from the first
     iteration on), CG to 1e-12 with Jacobi on the (shifted) pre-matrix and a unit step
     (``-tao_ls_type unit``): x₁ − x₀ is the Newton direction TAO computed.
     """
@@ -261,17 +262,7 @@ def test_tao_perturbed_newton_step(tao_type):
     x = x0.copy()
     g = x.duplicate()
 
-    def objective(tao, x):
-        problem.set_from_x(x)
-        return problem.energy()
-
-    def objective_gradient(tao, x, g):
-        problem.set_from_x(x)
-        return problem.riemannian_gradient(g)
-
-    def update(tao, it):
-        problem.set_from_x(tao.getSolution())
-        problem.write_x(tao.getSolution())
+    objective, objective_gradient, update = tao_callbacks(problem)  # as solvers.solve uses
 
     model = solvers.GaussNewtonModel(problem, x)
     seen = {}

@@ -46,6 +46,7 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
 from ufl_frames.fem import energy, scales  # noqa: E402
+from ufl_frames.fem.energy import check_frame_function as check_frame_field  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
 
 __all__ = [
@@ -128,33 +129,6 @@ def _one_line(e: BaseException) -> str:
 
 
 # --- checks on the arguments --------------------------------------------------------------
-
-
-def check_frame_field(q, what: str = "q") -> None:
-    """Raise ValueError unless ``q`` is a P1 frame field: a DOLFINx Function with 5
-    components per vertex on a 2D triangle mesh (what :func:`ufl_frames.fem.energy.frame_space`
-    makes)."""
-    if not isinstance(q, fem.Function):
-        raise ValueError(f"{what} must be a dolfinx.fem.Function, got {type(q).__name__}")
-    V = q.function_space
-    mesh = V.mesh
-    cell = mesh.topology.cell_type
-    if mesh.topology.dim != 2 or cell != dolfinx.mesh.CellType.triangle:
-        raise ValueError(f"{what} must live on a 2D triangle mesh, got {cell.name} cells")
-    if mesh.geometry.dim != 2:
-        raise ValueError(f"{what} must live on a planar mesh (geometric dimension 2), "
-                         f"got {mesh.geometry.dim}")
-    element = V.ufl_element()
-    shape = tuple(V.value_shape)
-    family = getattr(element, "family_name", "?")
-    degree = getattr(element, "embedded_superdegree", None)
-    if shape != (odeco.NUM_COEFFICIENTS,):
-        raise ValueError(f"{what} must have {odeco.NUM_COEFFICIENTS} components (the Odeco "
-                         f"coefficients), got value shape {shape}")
-    if family not in ("P", "Lagrange", "CG") or degree != 1 or getattr(
-            element, "discontinuous", False):
-        raise ValueError(f"{what} must be a continuous P1 (degree-1 Lagrange) field, got "
-                         f"{family} of degree {degree}")
 
 
 def _check_history(history) -> None:

@@ -44,21 +44,21 @@ def check_frame_mesh(mesh) -> None:
                          f"degree {mesh.geometry.cmaps[0].degree}")
 
 
-def check_frame_function(q) -> None:
+def check_frame_function(q, what: str = "q") -> None:
     """Raise ValueError unless ``q`` is a continuous P1 field of the 5 Odeco coefficients
     on a mesh that :func:`check_frame_mesh` accepts (what every form here assumes)."""
-    V = getattr(q, "function_space", None)
-    if V is None:
-        raise ValueError(f"q must be a dolfinx Function, got {type(q).__name__}")
+    if not isinstance(q, fem.Function):
+        raise ValueError(f"{what} must be a dolfinx Function, got {type(q).__name__}")
+    V = q.function_space
     check_frame_mesh(V.mesh)
     element = V.ufl_element()
-    if (V.dofmap.index_map_bs != odeco.NUM_COEFFICIENTS or element.embedded_superdegree != 1
-            or getattr(element, "discontinuous", False)):
+    shape, degree = tuple(V.value_shape), element.embedded_superdegree
+    discontinuous = getattr(element, "discontinuous", False)
+    if shape != (odeco.NUM_COEFFICIENTS,) or degree != 1 or discontinuous:
         raise ValueError(
-            f"q must be a continuous P1 function with {odeco.NUM_COEFFICIENTS} components "
-            f"(see frame_space), got block size {V.dofmap.index_map_bs}, degree "
-            f"{element.embedded_superdegree}"
-            + (", discontinuous" if getattr(element, "discontinuous", False) else ""))
+            f"{what} must be a continuous P1 function with {odeco.NUM_COEFFICIENTS} "
+            f"components (see frame_space), got value shape {shape}, degree {degree}"
+            + (", discontinuous" if discontinuous else ""))
 
 
 def frame_space(mesh) -> fem.FunctionSpace:

@@ -224,8 +224,9 @@ def frame_problem(
     rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
     if pin_singularities:
         constraints = _pin_singular_vertices(V, constraints, rows)
-    projected = FrameManifold(constraints).project(rows)
-    manifold = FrameManifold(constraints, radius2=FrameManifold(constraints).norm2(projected))
+    cone = FrameManifold(constraints)  # no sphere yet: it passes through the projection
+    projected = cone.project(rows)
+    manifold = FrameManifold(constraints, radius2=cone.norm2(projected))
     H = energy.integrability_energy_form(q)
     problem = FrameProblem(
         q=q,

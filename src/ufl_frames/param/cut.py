@@ -60,8 +60,8 @@ def face_frames(cells: np.ndarray, q: np.ndarray):
 
 
 def interior_edges(cells: np.ndarray):
-    """The edges of the mesh: (edges (E, 2) sorted, faces (E, 2) with −1 for none, local
-    index in each face of the vertex opposite the edge (E, 2))."""
+    """The edges of the mesh: edges (E, 2) sorted, and faces (E, 2) holding the one or two
+    triangles of each (−1 for none: a boundary edge)."""
     m = cells.shape[0]
     local = np.array([[1, 2], [2, 0], [0, 1]])  # edge opposite vertex i
     pairs = cells[:, local].reshape(-1, 2)
@@ -73,14 +73,12 @@ def interior_edges(cells: np.ndarray):
     if np.any(counts > 2):
         raise ValueError("an edge is shared by more than two triangles")
     face = np.repeat(np.arange(m), 3)[order]
-    opposite = np.tile(np.arange(3), m)[order]
     faces = np.full((unique.size, 2), -1, dtype=np.int64)
-    opp = np.full((unique.size, 2), -1, dtype=np.int64)
-    faces[:, 0], opp[:, 0] = face[first], opposite[first]
+    faces[:, 0] = face[first]
     two = counts == 2
-    faces[two, 1], opp[two, 1] = face[first[two] + 1], opposite[first[two] + 1]
+    faces[two, 1] = face[first[two] + 1]
     edges = np.stack([unique // n, unique % n], axis=1)
-    return edges, faces, opp
+    return edges, faces
 
 
 def matchings(angle: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -91,14 +89,6 @@ def matchings(angle: np.ndarray, faces: np.ndarray) -> np.ndarray:
     f, g = faces[inner, 0], faces[inner, 1]
     k[inner] = np.mod(np.rint((angle[f] - angle[g]) / QUARTER), 4).astype(np.int64)
     return k
-
-
-def _vertex_fans(cells, edges, faces):
-    """For every vertex, its incident edges (CSR of edge ids)."""
-    n = int(cells.max()) + 1
-    rows = np.concatenate([edges[:, 0], edges[:, 1]])
-    cols = np.concatenate([np.arange(edges.shape[0])] * 2)
-    return sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, edges.shape[0]))
 
 
 def singular_vertices(cells, angle, edges, faces) -> tuple[np.ndarray, np.ndarray]:
@@ -287,7 +277,7 @@ def cut_mesh(x, cells, q) -> CutMesh:
     clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
     cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
     angle, l1, l2 = face_frames(cells, np.asarray(q, dtype=np.float64))
-    edges, faces, _ = interior_edges(cells)
+    edges, faces = interior_edges(cells)
     k = matchings(angle, faces)
     singular, turns = singular_vertices(cells, angle, edges, faces)
     cut, paths = cut_graph(x, cells, edges, faces, singular)

@@ -126,7 +126,6 @@ class GaussNewtonModel:
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.release, self.active = release, None
         self.adapt, self.adaptation = adapt, 1.0  # the factor a of λ (see ADAPT_FACTOR)
-        self._updates = 0
         self.exact, self.sphere = exact, 0.0
         for name in self._OWNED:
             setattr(self, name, None)
@@ -234,13 +233,12 @@ class GaussNewtonModel:
     def update(self, tao, x, H, P):
         """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
         self.problem.set_from_x(x)
-        if self.adapt and self._updates:
+        if self.adapt and self.gnorm0 is not None:  # after the first Newton step
             step = tao.getSolutionStatus()[4]  # the last line search's step length
             if step >= 1.0 - 1e-12:
                 self.adaptation = max(ADAPT_FLOOR, self.adaptation / ADAPT_FACTOR)
             else:
                 self.adaptation = min(1.0, self.adaptation * ADAPT_FACTOR)
-        self._updates += 1
         self._hold_active_set(tao.getGradient()[0])
         self.assemble(gnorm=tao.getGradient()[0].norm())
 

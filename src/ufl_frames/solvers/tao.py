@@ -204,6 +204,30 @@ def solve(
         return _solve(problem, tao_type, options_prefix, monitor)
 
 
+def tao_callbacks(problem: FrameProblem):
+    """TAO's objective, objective-and-gradient and update callbacks on 𝓜 for ``problem``.
+
+    Each sets q = R(x) first (one retraction per iterate under
+    :meth:`FrameProblem.tracking`); the objective is H(R(x)), the gradient the Riemannian
+    one (steps 1–2), and the update hook, at the start of every iteration, writes the
+    retracted iterate back into x, so every iterate lies on 𝓜.
+    """
+
+    def objective(tao, x):
+        problem.set_from_x(x)
+        return problem.energy()
+
+    def objective_gradient(tao, x, g):
+        problem.set_from_x(x)
+        return problem.riemannian_gradient(g)
+
+    def update(tao, it):
+        problem.set_from_x(tao.getSolution())
+        problem.write_x(tao.getSolution())
+
+    return objective, objective_gradient, update
+
+
 def _released(exc: BaseException) -> BaseException:
     """``exc`` with the locals of this module's frames in its traceback cleared.
 
@@ -258,17 +282,7 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
 
         return call
 
-    def objective(tao, x):
-        problem.set_from_x(x)
-        return problem.energy()
-
-    def objective_gradient(tao, x, g):
-        problem.set_from_x(x)
-        return problem.riemannian_gradient(g)
-
-    def update(tao, it):
-        problem.set_from_x(tao.getSolution())
-        problem.write_x(tao.getSolution())
+    objective, objective_gradient, update = tao_callbacks(problem)
 
     history = []
     linear_iterations = [0, 0]  # Krylov iterations so far, and at the last history entry
