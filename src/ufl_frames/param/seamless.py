@@ -31,7 +31,8 @@ import scipy.sparse.linalg as spla
 
 from ufl_frames.param.cut import CutMesh
 
-__all__ = ["Parametrisation", "gradients", "integrate", "targets"]
+__all__ = ["Parametrisation", "boundary_coordinates", "gradients", "integrate",
+           "least_squares_system", "parametrisation", "quarter_turn", "targets", "wedge_of"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -53,22 +54,40 @@ def targets(mesh: CutMesh, scale: float):
     return target_u, target_v
 
 
-def _rot(j: int) -> np.ndarray:
+def quarter_turn(j: int) -> np.ndarray:
     """Rot^j as a 2 × 2 matrix, Rot(U, V) = (V, −U)."""
     return np.linalg.matrix_power(np.array([[0.0, 1.0], [-1.0, 0.0]]), int(j) % 4)
 
 
-def _constraints(mesh: CutMesh) -> list[dict]:
+def boundary_coordinates(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary edges and, per edge, the coordinate (0: U, 1: V) that is constant
+    along it: that of the branch of its triangle's frame that crosses it (the more normal)."""
+    boundary = np.flatnonzero(mesh.faces[:, 1] < 0)
+    f = mesh.faces[boundary, 0]
+    direction = mesh.x[mesh.edges[boundary, 1]] - mesh.x[mesh.edges[boundary, 0]]
+    along_u = np.abs(np.cos(mesh.angle[f]) * direction[:, 0]
+                     + np.sin(mesh.angle[f]) * direction[:, 1])
+    along_v = np.abs(-np.sin(mesh.angle[f]) * direction[:, 0]
+                     + np.cos(mesh.angle[f]) * direction[:, 1])
+    return boundary, np.where(along_u < along_v, 0, 1)
+
+
+def wedge_of(mesh: CutMesh, face: int, vertex: int) -> int:
+    """The cut-mesh vertex (wedge) of triangle ``face`` at mesh vertex ``vertex``."""
+    return int(mesh.corners[face, int(np.flatnonzero(mesh.cells[face] == vertex)[0])])
+
+
+def _constraints(mesh: CutMesh, anchor: int = 0) -> list[dict]:
     """Sparse rows {scalar unknown: coefficient} = 0 (unknown 2w + c: coordinate c of wedge w)."""
     rows = []
-    cells, corners, edges, faces = mesh.cells, mesh.corners, mesh.edges, mesh.faces
+    edges, faces = mesh.edges, mesh.faces
 
     def wedge(face, vertex):
-        return int(corners[face, int(np.flatnonzero(cells[face] == vertex)[0])])
+        return wedge_of(mesh, face, vertex)
 
     for e in mesh.cut:
         f, g = int(faces[e, 0]), int(faces[e, 1])
-        rot = _rot(mesh.jump[e])
+        rot = quarter_turn(mesh.jump[e])
         a, b = int(edges[e, 0]), int(edges[e, 1])
         wf_a, wf_b, wg_a, wg_b = wedge(f, a), wedge(f, b), wedge(g, a), wedge(g, b)
         for c in range(2):  # (X_g(a) − Rot X_f(a)) − (X_g(b) − Rot X_f(b)) = 0, component c
@@ -84,19 +103,13 @@ def _constraints(mesh: CutMesh) -> list[dict]:
                     add(2 * wf_a + d, -rot[c, d])
                     add(2 * wf_b + d, rot[c, d])
             rows.append(row)
-    boundary = np.flatnonzero(faces[:, 1] < 0)
-    x = mesh.x
-    for e in boundary:
+    boundary, coordinate = boundary_coordinates(mesh)
+    for e, c in zip(boundary, coordinate, strict=True):
         f = int(faces[e, 0])
         a, b = int(edges[e, 0]), int(edges[e, 1])
-        direction = x[b] - x[a]
-        u = np.array([np.cos(mesh.angle[f]), np.sin(mesh.angle[f])])
-        v = np.array([-u[1], u[0]])
-        # the branch crossing the edge: its coordinate is constant along it
-        c = 0 if abs(u @ direction) < abs(v @ direction) else 1
         rows.append({2 * wedge(f, a) + c: 1.0, 2 * wedge(f, b) + c: -1.0})
-    rows.append({0: 1.0})
-    rows.append({1: 1.0})
+    rows.append({2 * anchor: 1.0})
+    rows.append({2 * anchor + 1: 1.0})
     return rows
 
 
@@ -164,8 +177,10 @@ class Parametrisation:
         return self.uv[self.mesh.corners]
 
 
-def integrate(mesh: CutMesh, scale: float = 1.0) -> Parametrisation:
-    """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``."""
+def least_squares_system(mesh: CutMesh, scale: float = 1.0, anchor: int = 0):
+    """The seamless problem in the free unknowns y: (A T, b, T), x = T y the wedge values
+    (x[2w + c]: coordinate c of wedge w) satisfying the seams, the boundary alignment and
+    (U, V) = 0 at wedge ``anchor``, and A x − b the area-weighted misfit rows."""
     area, grad = gradients(mesh.x, mesh.cells)
     target_u, target_v = targets(mesh, scale)
     m, count = mesh.cells.shape[0], 2 * mesh.num_wedges
@@ -183,13 +198,24 @@ def integrate(mesh: CutMesh, scale: float = 1.0) -> Parametrisation:
     b = np.empty(4 * m)
     b[0::4], b[1::4] = weight * target_u[:, 0], weight * target_u[:, 1]
     b[2::4], b[3::4] = weight * target_v[:, 0], weight * target_v[:, 1]
-    T = _eliminate(_constraints(mesh), count)
-    AT = (A @ T).tocsc()
-    normal = (AT.T @ AT).tocsc()
-    y = spla.spsolve(normal, AT.T @ b)
-    uv = (T @ y).reshape(-1, 2)
+    T = _eliminate(_constraints(mesh, anchor), count)
+    return (A @ T).tocsc(), b, T
+
+
+def parametrisation(mesh: CutMesh, uv: np.ndarray, scale: float) -> Parametrisation:
+    """The :class:`Parametrisation` of the wedge values ``uv`` (W, 2) at scale ``scale``."""
+    area, grad = gradients(mesh.x, mesh.cells)
+    target_u, target_v = targets(mesh, scale)
     corner = uv[mesh.corners]  # (m, 3, 2)
     grad_u = np.einsum("mi,mik->mk", corner[..., 0], grad)
     grad_v = np.einsum("mi,mik->mk", corner[..., 1], grad)
     return Parametrisation(mesh=mesh, uv=uv, scale=scale, grad_u=grad_u, grad_v=grad_v,
                            target_u=target_u, target_v=target_v, area=area)
+
+
+def integrate(mesh: CutMesh, scale: float = 1.0, anchor: int = 0) -> Parametrisation:
+    """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``, zero
+    at wedge ``anchor``."""
+    AT, b, T = least_squares_system(mesh, scale, anchor)
+    y = spla.spsolve((AT.T @ AT).tocsc(), AT.T @ b)
+    return parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
