@@ -164,9 +164,13 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--param", action="store_true",
                        help="also integrate the field into a seamless parametrisation (U, V): "
                        "param.png (integer iso-lines), param.vtu and 'param' in summary.json")
+    solve.add_argument("--quads", action="store_true",
+                       help="also make a quad mesh of the field (integer-grid map, iso-line "
+                       "extraction): quads.msh (Gmsh MSH 4.1), quads.vtu, quads.png and "
+                       "'quads' in summary.json")
     solve.add_argument("--quad-size", type=_positive_float, default=None, metavar="S",
-                       help="with --param: the quad edge length the integer iso-lines of U and "
-                       "V outline (default: about one quad per 8 triangles)")
+                       help="the quads' mean edge length (default: with --quads the triangles' "
+                       "mean edge length; with --param only, about one quad per 8 triangles)")
     solve.add_argument("--free-singularities", action="store_true",
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "
@@ -343,9 +347,11 @@ def run_solve(
     max_triangles: float | None = None,
     param: bool = False,
     quad_size: float | None = None,
+    quads: bool = False,
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
-    :meth:`~ufl_frames.pipeline.FrameField.parametrise`) → files in ``out``; return the
+    :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
+    :meth:`~ufl_frames.pipeline.FrameField.quadrangulate`) → files in ``out``; return the
     summary (all ranks).
 
     Collective over ``comm`` (default ``MPI.COMM_WORLD``). Raises :class:`InputError`
@@ -439,6 +445,19 @@ def run_solve(
             f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
             f"of length {quality['cut_length']:.3g}")
         interrupts.checkpoint(comm)
+    if quads:
+        interrupts.set_stage("the quad mesh")
+        say("quad mesh ...")
+        with _failures("the quad mesh"):
+            try:
+                found = field.quadrangulate(quad_size=quad_size)
+            except ValueError as e:  # no valid integer-grid map: the same on every rank
+                raise RunError(str(e)) from e
+        say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
+            f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
+            f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
+            + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
+        interrupts.checkpoint(comm)
 
     folder = io.OutputFolder(out, force=force, comm=comm)
     try:
@@ -448,6 +467,8 @@ def run_solve(
             files = field.write(staging, label=Path(geometry).stem, tao_type=tao_type)
             if param:
                 files += field.write_param(staging, label=Path(geometry).stem)
+            if quads:
+                files += field.write_quads(staging, label=Path(geometry).stem)
             files.append("summary.json")
             record = field.summary()
             summary = {
@@ -713,6 +734,7 @@ def main(argv: list[str] | None = None) -> int:
                         max_triangles=args.max_triangles,
                         param=args.param,
                         quad_size=args.quad_size,
+                        quads=args.quads,
                     )
                 except Exception as e:
                     watch.stage = "reporting the failure"

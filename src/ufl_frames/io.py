@@ -814,6 +814,7 @@ OUTPUT_NAMES = (
     r"summary\.json", r"frames\.bp", r"frames\.pvd", r"frames\d+\.pvtu", r"frames_p\d+_\d+\.vtu",
     r"frames\.xdmf", r"frames\.h5", r"frames\.png", r"convergence\.png",
     r"param\.png", r"param\.vtu",  # FrameField.write_param
+    r"quads\.msh", r"quads\.vtu", r"quads\.png",  # FrameField.write_quads
 )
 _OUTPUT_NAME = re.compile("|".join(f"(?:{name})" for name in OUTPUT_NAMES))
 #: Seconds :meth:`OutputFolder.commit` waits for another run replacing files in the same

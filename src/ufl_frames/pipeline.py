@@ -64,6 +64,9 @@ class FrameField:
     #: The last :meth:`parametrise`'s map (on rank 0; None elsewhere) and its measures.
     parametrisation: object | None = field(default=None, repr=False)
     param_quality: dict | None = None
+    #: The last :meth:`quadrangulate`'s quad mesh (on rank 0; None elsewhere), its measures.
+    quad_mesh: object | None = field(default=None, repr=False)
+    quad_quality: dict | None = None
 
     @classmethod
     def initial(
@@ -100,38 +103,108 @@ class FrameField:
         self.pinned_singularities = pin_singularities
         return self.result
 
-    def parametrise(self, quad_size: float | None = None) -> dict:
-        """The seamless map (U, V) of the current field (:mod:`ufl_frames.param`): cut,
-        combed and integrated on rank 0; its measures, the same dict on every rank.
-
-        ``quad_size``: the edge length of the quads the integer iso-lines of U and V
-        outline (default: about one quad per :data:`TRIANGLES_PER_QUAD` triangles).
-        """
-        from ufl_frames.param import cut, measures, seamless
+    def _on_root(self, work, failure: str):
+        """``work(cut_mesh)`` on rank 0, the field cut into a disk there (collective); its
+        result on every rank, or ValueError("<failure>: <why>") on every rank."""
+        from ufl_frames.param import cut
         from ufl_frames.param.gather import gather_field
+        from ufl_frames.quads.extract import ExtractionError
 
         comm = self.domain.comm
         x, cells, rows = gather_field(self.q)
         result, error = None, None
         if comm.rank == 0:
             try:
-                mesh = cut.cut_mesh(x, cells, rows)
-                area, _ = seamless.gradients(mesh.x, mesh.cells)
-                size = np.sqrt(mesh.l1 * mesh.l2)  # the frame's length scale per triangle
-                if quad_size is None:
-                    quads = max(1.0, mesh.cells.shape[0] / TRIANGLES_PER_QUAD)
-                    scale = float(np.sqrt(quads / np.dot(area, 1 / size**2)))
-                else:
-                    scale = float(np.dot(area, size) / area.sum() / quad_size)
-                self.parametrisation = seamless.integrate(mesh, scale)
-                result = measures.quality(self.parametrisation)
-            except (ValueError, np.linalg.LinAlgError, RuntimeError) as e:
-                error = f"cannot parametrise this field: {e}"
+                result = work(cut.cut_mesh(x, cells, rows))
+            except (ValueError, np.linalg.LinAlgError, RuntimeError, ExtractionError) as e:
+                error = f"{failure}: {e}"
         error = comm.bcast(error, root=0)
         if error is not None:
             raise ValueError(error)
-        self.param_quality = comm.bcast(result, root=0)
+        return comm.bcast(result, root=0)
+
+    def parametrise(self, quad_size: float | None = None) -> dict:
+        """The seamless map (U, V) of the current field (:mod:`ufl_frames.param`): cut,
+        combed and integrated on rank 0; its measures, the same dict on every rank.
+
+        ``quad_size``: the mean edge length of the quads the integer iso-lines of U and V
+        outline (default: about one quad per :data:`TRIANGLES_PER_QUAD` triangles).
+        """
+        from ufl_frames.param import measures, seamless
+
+        def work(mesh):
+            if quad_size is None:
+                quads = max(1.0, mesh.cells.shape[0] / TRIANGLES_PER_QUAD)
+                scale = seamless.scale_for_quad_count(mesh, quads)
+            else:
+                scale = seamless.scale_for_quad_size(mesh, quad_size)
+            self.parametrisation = seamless.integrate(mesh, scale)
+            return measures.quality(self.parametrisation)
+
+        self.param_quality = self._on_root(work, "cannot parametrise this field")
         return self.param_quality
+
+    def quadrangulate(self, quad_size: float | None = None) -> dict:
+        """The quad mesh of the current field (:mod:`ufl_frames.quads`): the seamless map
+        quantised to an integer-grid map (:func:`~ufl_frames.param.quantise.quantise`), its
+        integer iso-lines traced into quads (:func:`~ufl_frames.quads.extract.extract_quads`),
+        on rank 0. Returns the measures (:func:`~ufl_frames.quads.measures.quad_quality`,
+        with ``valid``, ``problems``, ``quad_size``, the rounding's and the seconds per
+        stage), the same dict on every rank; ``quad_mesh`` holds the mesh on rank 0.
+
+        ``quad_size``: the quads' target mean edge length (default: the triangles' mean
+        edge length, about one quad per two triangles). Raises ValueError (every rank)
+        where no valid integer-grid map exists at that size.
+        """
+        import time
+
+        from ufl_frames.fem.scales import mean_cell_edge
+        from ufl_frames.param import measures as param_measures
+        from ufl_frames.param import quantise, seamless
+        from ufl_frames.quads import extract, measures
+
+        size = mean_cell_edge(self.domain.mesh) if quad_size is None else float(quad_size)
+
+        def work(mesh):
+            start = time.perf_counter()
+            scale = seamless.scale_for_quad_size(mesh, size)
+            grid_map = quantise.quantise(mesh, scale)
+            quantised = time.perf_counter()
+            quad_mesh = extract.extract_quads(grid_map)
+            extracted = time.perf_counter()
+            self.quad_mesh = quad_mesh
+            area = float(grid_map.param.area.sum())
+            problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads)
+            record = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+            record.update(
+                valid=not problems, problems=problems[:5], quad_size=size,
+                area_error=abs(record["area"] - area) / area,
+                misfit_seamless=param_measures.quality(grid_map.seamless)["misfit"],
+                misfit_quantised=param_measures.quality(grid_map.param)["misfit"],
+                rounded=grid_map.rounded, max_rounding=grid_map.max_shift,
+                seconds={"quantise": quantised - start, "extract": extracted - quantised})
+            return record
+
+        self.quad_quality = self._on_root(work, "cannot make quads of this field")
+        return self.quad_quality
+
+    def write_quads(self, out, label: str) -> list[str]:
+        """``quads.msh`` (Gmsh MSH 4.1), ``quads.vtu`` and ``quads.png`` of the last
+        :meth:`quadrangulate` into ``out``."""
+        from ufl_frames.quads.measures import scaled_jacobians
+        from ufl_frames.quads.msh import plot_quads, write_quad_msh, write_quad_vtu
+
+        if self.domain.comm.rank == 0:
+            mesh, quality = self.quad_mesh, self.quad_quality
+            out = Path(out)
+            write_quad_msh(out / "quads.msh", mesh.points, mesh.quads)
+            write_quad_vtu(out / "quads.vtu", mesh.points, mesh.quads,
+                           {"scaled_jacobian": scaled_jacobians(mesh.points, mesh.quads)})
+            title = (f"{label}: {quality['quads']} quads, {quality['irregular_vertices']} "
+                     f"irregular vertices, min SJ {quality['min_sj']:.2f}")
+            plot_quads(out / "quads.png", mesh.points, mesh.quads, title=title)
+        self.domain.comm.Barrier()
+        return ["quads.msh", "quads.vtu", "quads.png"]
 
     def write_param(self, out, label: str, stem: str = "param") -> list[str]:
         """``<stem>.png`` and ``<stem>.vtu`` of the last :meth:`parametrise` into ``out``."""
@@ -174,6 +247,8 @@ class FrameField:
         record["poincare_hopf"] = self.index_theorem()
         if self.param_quality is not None:
             record["param"] = self.param_quality
+        if self.quad_quality is not None:
+            record["quads"] = self.quad_quality
         if result is not None:
             record["history"] = result.history
         return record

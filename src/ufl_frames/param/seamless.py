@@ -32,7 +32,8 @@ import scipy.sparse.linalg as spla
 from ufl_frames.param.cut import CutMesh
 
 __all__ = ["Parametrisation", "boundary_coordinates", "gradients", "integrate",
-           "least_squares_system", "parametrisation", "quarter_turn", "targets", "wedge_of"]
+           "least_squares_system", "parametrisation", "quarter_turn", "scale_for_quad_count",
+           "scale_for_quad_size", "targets", "wedge_of"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -75,6 +76,22 @@ def boundary_coordinates(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray]:
 def wedge_of(mesh: CutMesh, face: int, vertex: int) -> int:
     """The cut-mesh vertex (wedge) of triangle ``face`` at mesh vertex ``vertex``."""
     return int(mesh.corners[face, int(np.flatnonzero(mesh.cells[face] == vertex)[0])])
+
+
+def scale_for_quad_count(mesh: CutMesh, quads: float) -> float:
+    """The scale s at which the grid has about ``quads`` cells: a cell of the field's
+    grid has area l1 l2 / s², so their number is s² ∫ 1/(l1 l2)."""
+    area, _ = gradients(mesh.x, mesh.cells)
+    return float(np.sqrt(quads / np.dot(area, 1.0 / (mesh.l1 * mesh.l2))))
+
+
+def scale_for_quad_size(mesh: CutMesh, quad_size: float) -> float:
+    """The scale s at which the grid's cells have mean edge length ``quad_size``: cells
+    of edges l1/s, l2/s with density s²/(l1 l2), so the mean over cells is
+    (1/s) ∫ (l1 + l2)/(2 l1 l2) / ∫ 1/(l1 l2)."""
+    area, _ = gradients(mesh.x, mesh.cells)
+    density = area / (mesh.l1 * mesh.l2)
+    return float(np.dot(density, 0.5 * (mesh.l1 + mesh.l2)) / density.sum() / quad_size)
 
 
 def _constraints(mesh: CutMesh, anchor: int = 0) -> list[dict]:

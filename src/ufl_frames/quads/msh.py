@@ -1,0 +1,229 @@
+"""Quad meshes on disk and on screen: Gmsh MSH 4.1, ParaView ``.vtu``, a picture.
+
+A quad mesh is ``points`` (n, 2) and ``quads`` (m, 4), counter-clockwise rows of point
+indices (:mod:`ufl_frames.quads.measures`).
+
+* :func:`write_quad_msh` — MSH 4.1 through the Gmsh API: one discrete surface holding the
+  4-node quads (Gmsh type 3) and one discrete curve holding the boundary lines (type 1),
+  physical groups ``domain`` (2D, tag 1) and ``boundary`` (1D, tag 2), so that
+  ``dolfinx.io.gmsh.read_from_msh(path, comm, 0, gdim=2)`` reads a quadrilateral mesh with
+  its boundary facets tagged 2.
+* :func:`gmsh_quality` — Gmsh's own per-element quality of the quads. ``minSIGE`` is an
+  independent check of :func:`~ufl_frames.quads.measures.scaled_jacobians` (the same
+  number on valid linear quads); ``minSJ``, the default, is Gmsh's Jacobian ratio (min
+  corner Jacobian / Jacobian at the centre), not the corner-angle scaled Jacobian.
+* :func:`write_quad_vtu` — ASCII VTK XML unstructured grid (VTK_QUAD = 9) with cell data,
+  written with NumPy alone.
+* :func:`plot_quads` — the quads coloured by scaled Jacobian, irregular vertices marked.
+
+Gmsh is imported only by the functions that use it. It is finalised afterwards unless the
+caller had initialised it; then the caller's current model and the options touched here
+are restored.
+"""
+
+import contextlib
+from pathlib import Path
+
+import numpy as np
+
+from ufl_frames.quads.measures import _arrays, scaled_jacobians, vertex_valence
+
+__all__ = ["gmsh_quality", "plot_quads", "write_quad_msh", "write_quad_vtu"]
+
+#: Physical group tags of :func:`write_quad_msh`.
+DOMAIN_TAG = 1
+BOUNDARY_TAG = 2
+#: Gmsh element types.
+GMSH_LINE, GMSH_QUAD = 1, 3
+#: VTK cell type of a 4-node quadrilateral.
+VTK_QUAD = 9
+
+_TOUCHED_OPTIONS = ("General.Terminal", "Mesh.MshFileVersion", "Mesh.Binary",
+                    "Mesh.SaveAll")
+
+
+@contextlib.contextmanager
+def _gmsh_model(name: str):
+    """A fresh Gmsh model, current inside the block; Gmsh left as it was found."""
+    import gmsh
+
+    owns = not gmsh.isInitialized()
+    saved, previous = {}, None
+    if owns:
+        gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
+    else:
+        saved = {k: gmsh.option.getNumber(k) for k in _TOUCHED_OPTIONS}
+        previous = gmsh.model.getCurrent()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add(name)
+        yield gmsh
+    finally:
+        if owns:
+            gmsh.finalize()
+        elif gmsh.isInitialized():
+            try:
+                gmsh.model.remove()
+                if previous:
+                    gmsh.model.setCurrent(previous)
+            finally:
+                for key, value in saved.items():
+                    gmsh.option.setNumber(key, value)
+
+
+def boundary_edges(quads) -> np.ndarray:
+    """Edges (k, 2) in one quad only, directed as in their quad (domain on the left)."""
+    q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    directed = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
+    ordered = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(ordered, axis=0, return_inverse=True, return_counts=True)
+    return directed[counts[inverse.ravel()] == 1]
+
+
+def _add_quads(gmsh, x: np.ndarray, q: np.ndarray, lines: np.ndarray) -> tuple[int, int | None]:
+    """Nodes (tags 1..n), quads (tags 1..m) and lines (m+1..) in the current model, on a
+    discrete surface and, if there are lines, a discrete curve bounding it."""
+    n, m = x.shape[0], q.shape[0]
+    xyz = np.c_[x, np.zeros(n)]
+    tags = np.arange(1, n + 1)
+    curve = gmsh.model.addDiscreteEntity(1) if lines.size else None
+    surface = gmsh.model.addDiscreteEntity(2, -1, [curve] if curve else [])
+    on_curve = np.zeros(n, dtype=bool)
+    if curve is not None:
+        on_curve[lines.ravel()] = True
+        gmsh.model.mesh.addNodes(1, curve, tags[on_curve], xyz[on_curve].ravel())
+    gmsh.model.mesh.addNodes(2, surface, tags[~on_curve], xyz[~on_curve].ravel())
+    gmsh.model.mesh.addElementsByType(surface, GMSH_QUAD, np.arange(1, m + 1),
+                                      (q + 1).ravel())
+    if curve is not None:
+        gmsh.model.mesh.addElementsByType(curve, GMSH_LINE,
+                                          np.arange(m + 1, m + 1 + lines.shape[0]),
+                                          (lines + 1).ravel())
+    return surface, curve
+
+
+def write_quad_msh(path, points, quads, boundary=None) -> Path:
+    """Write the quad mesh as Gmsh MSH 4.1 (ASCII) to ``path`` (a ``.msh`` file).
+
+    ``boundary`` (k, 2): the point pairs written as boundary lines (physical group
+    ``boundary``); None: the mesh's boundary edges (:func:`boundary_edges`); an empty
+    array: no lines and no boundary group. Node i is Gmsh node i + 1, quad j element j + 1.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".msh":
+        raise ValueError(f"write_quad_msh writes .msh files, got {str(path)!r}")
+    x, q = _arrays(points, quads)
+    lines = boundary_edges(q) if boundary is None else np.asarray(boundary, dtype=np.int64)
+    lines = lines.reshape(-1, 2)
+    if lines.size and (lines.min() < 0 or lines.max() >= x.shape[0]):
+        raise ValueError(f"boundary edges index points outside 0..{x.shape[0] - 1}")
+    with _gmsh_model(f"quads_{path.stem}") as gmsh:
+        surface, curve = _add_quads(gmsh, x, q, lines)
+        gmsh.model.addPhysicalGroup(2, [surface], DOMAIN_TAG, name="domain")
+        if curve is not None:
+            gmsh.model.addPhysicalGroup(1, [curve], BOUNDARY_TAG, name="boundary")
+        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
+        gmsh.option.setNumber("Mesh.Binary", 0)
+        gmsh.option.setNumber("Mesh.SaveAll", 0)
+        gmsh.write(str(path))
+    return path
+
+
+def gmsh_quality(points, quads, measure: str = "minSJ") -> np.ndarray:
+    """Gmsh's ``getElementQualities`` of every quad (m,), ``measure`` one of Gmsh's names
+    (``minSJ``, ``minSICN``, ``minSIGE``, ``gamma``, ...; module docstring). Gmsh ignores
+    the orientation: a clockwise square gets 1."""
+    x, q = _arrays(points, quads)
+    with _gmsh_model("quads_quality") as gmsh:
+        _add_quads(gmsh, x, q, np.zeros((0, 2), dtype=np.int64))
+        return np.asarray(
+            gmsh.model.mesh.getElementQualities(np.arange(1, q.shape[0] + 1), measure),
+            dtype=float)
+
+
+def write_quad_vtu(path, points, quads, cell_data: dict | None = None) -> Path:
+    """Write the quad mesh with ``cell_data`` (name → (m,) or (m, c) array) as an ASCII
+    VTK XML unstructured grid (``.vtu``) for ParaView."""
+    x, q = _arrays(points, quads)
+    m = q.shape[0]
+
+    def text(a, fmt="%.17g"):
+        return " ".join(fmt % v for v in np.asarray(a).ravel())
+
+    arrays = []
+    for name, values in (cell_data or {}).items():
+        a = np.asarray(values, dtype=float)
+        if a.shape[:1] != (m,) or a.ndim > 2:
+            raise ValueError(f"cell data {name!r} must have shape (m,) or (m, c) with m = {m}, "
+                             f"got {a.shape}")
+        components = 1 if a.ndim == 1 else a.shape[1]
+        arrays.append(f'<DataArray type="Float64" Name="{name}" '
+                      f'NumberOfComponents="{components}" format="ascii">{text(a)}</DataArray>')
+    points3 = np.c_[x, np.zeros(x.shape[0])]
+    offsets = text(4 * np.arange(1, m + 1), "%d")
+    body = f"""<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
+<UnstructuredGrid><Piece NumberOfPoints="{x.shape[0]}" NumberOfCells="{m}">
+<CellData>{"".join(arrays)}</CellData>
+<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">{text(points3)}</DataArray>
+</Points>
+<Cells>
+<DataArray type="Int64" Name="connectivity" format="ascii">{text(q, "%d")}</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">{offsets}</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">{text(np.full(m, VTK_QUAD), "%d")}</DataArray>
+</Cells>
+</Piece></UnstructuredGrid>
+</VTKFile>
+"""
+    path = Path(path)
+    path.write_text(body)
+    return path
+
+
+def plot_quads(path, points, quads, title: str = "", highlight: bool = True) -> Path:
+    """Picture of the quads coloured by scaled Jacobian (colour bar), with the irregular
+    vertices marked: fewer edges than regular (valence 3 inside) as blue dots, more
+    (valence 5 inside) as red squares."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    x, q = _arrays(points, quads)
+    sj = scaled_jacobians(x, q)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    aspect = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-300)
+    fig, ax = plt.subplots(figsize=(7.5, max(2.5, min(9.0, 6.5 * aspect)) + 0.8))
+    cells = PolyCollection(x[q], array=sj, cmap="viridis", edgecolors="k",
+                           linewidths=0.3 if q.shape[0] < 5000 else 0.0)
+    cells.set_clim(min(0.0, float(sj.min())), 1.0)
+    ax.add_collection(cells)
+    fig.colorbar(cells, ax=ax, label="scaled Jacobian", shrink=0.8)
+    if highlight:
+        v = vertex_valence(x, q)
+        used = v["expected"] > 0
+        size = max(6.0, min(40.0, 4000.0 / max(q.shape[0], 1)))
+        for mask, style, label in (
+            (used & (v["valence"] < v["expected"]), dict(c="tab:blue", marker="o"),
+             "fewer edges (valence 3)"),
+            (used & (v["valence"] > v["expected"]), dict(c="tab:red", marker="s"),
+             "more edges (valence 5)"),
+        ):
+            if mask.any():
+                ax.scatter(x[mask, 0], x[mask, 1], s=size, zorder=3, edgecolors="w",
+                           linewidths=0.5, label=f"{label}: {int(mask.sum())}", **style)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=2, fontsize=8,
+                      frameon=False)
+    pad = 0.02 * max(hi - lo)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path

@@ -1,0 +1,114 @@
+"""Quantisation and quad extraction (``ufl_frames.param.quantise``,
+``ufl_frames.quads.extract``), pure NumPy/SciPy.
+
+Truth: fields whose integer-grid map is known. A constant frame on a rectangle: the map is
+affine, U = n x / width, V = m y / height with n, m the rounded quad counts, so the quads
+are the exact n × m grid (also on a mesh whose vertices lie on the grid lines, where every
+line passes through vertices and along edges). The isotropic annulus field (r e_r, r e_θ):
+U = a ln r + b, V = n θ / 2π, a structured polar grid of n_θ × n_r quads, all interior
+vertices of valence 4, the quads' corners on circles r₀ (r₁/r₀)^{k/n_r} to O(h²).
+Validity is checked by :func:`ufl_frames.quads.measures.check_quad_mesh`, written apart
+from the extraction: conformity, orientation, area.
+"""
+
+import numpy as np
+import pytest
+from test_param import annulus, annulus_field, grid
+
+from ufl_frames.frames2d import odeco
+from ufl_frames.param import cut, quantise, seamless
+from ufl_frames.quads import extract
+from ufl_frames.quads.measures import check_quad_mesh, quad_quality
+
+
+def constant_field(x, lengths=(1.0, 1.0)):
+    return odeco.frames_to_q(np.tile([lengths], (x.shape[0], 1)), np.zeros(x.shape[0]))
+
+
+def wobble(x, amount, width=2.0, height=1.0):
+    """Move the interior vertices of a rectangle mesh, keep the boundary."""
+    bump = x[:, :1] * (width - x[:, :1]) * x[:, 1:] * (height - x[:, 1:])
+    return x + amount * np.sin(7 * x[:, ::-1]) * bump
+
+
+@pytest.mark.parametrize("scale, mesh_wobble", [(3.3, 0.05), (4.0, 0.0), (2.6, 0.02)],
+                         ids=["generic", "lines-through-vertices", "coarse"])
+def test_rectangle_gives_the_exact_grid(scale, mesh_wobble):
+    x, cells = grid(8, 6, 0, 2, 0, 1)
+    x = wobble(x, mesh_wobble)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    grid_map = quantise.quantise(mesh, scale)
+    n, m = int(np.rint(2 * scale)), int(np.rint(scale))
+    assert grid_map.rounded >= 1
+    quads = extract.extract_quads(grid_map)
+    assert quads.num_quads == n * m
+    assert check_quad_mesh(quads.points, quads.quads, area=2.0, rtol=1e-9) == []
+    # the corners are the grid points (i 2/n, j/m), each once
+    expected = np.stack(np.meshgrid(np.arange(n + 1) * 2 / n, np.arange(m + 1) / m,
+                                    indexing="ij"), axis=-1).reshape(-1, 2)
+    assert quads.points.shape == expected.shape
+    distance = np.linalg.norm(quads.points[:, None] - expected[None], axis=2)
+    assert distance.min(axis=0).max() < 1e-4 / scale  # fixed point: 2⁻¹⁶ of a quad
+    assert np.unique(distance.argmin(axis=0)).size == expected.shape[0]
+    quality = quad_quality(quads.points, quads.quads)
+    assert quality["irregular_vertices"] == 0 and quality["min_sj"] > 1 - 1e-6
+
+
+def test_rectangle_anisotropic_frames_set_the_two_counts():
+    """Frames (l1, l2) = (1, 0.25): U advances s per unit length, V 4 s: quads 4 x thinner."""
+    x, cells = grid(10, 10, 0, 2, 0, 1)
+    mesh = cut.cut_mesh(x, cells, constant_field(x, (1.0, 0.25)))
+    quads = extract.extract_quads(quantise.quantise(mesh, 1.5))
+    counts = sorted([3 * 1, 1 * 6])  # 2·1.5 along x, 4·1.5 along y, in either labelling
+    assert quads.num_quads == counts[0] * counts[1]
+    assert check_quad_mesh(quads.points, quads.quads, area=2.0) == []
+
+
+@pytest.mark.parametrize("scale", [2.0, 4.0, 6.0])
+def test_annulus_gives_a_structured_polar_grid(scale):
+    r0, r1 = 0.5, 1.0
+    x, cells = annulus(12, 72, r0, r1)
+    mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    grid_map = quantise.quantise(mesh, scale)
+    n_theta, n_r = int(np.rint(2 * np.pi * scale)), int(np.rint(scale * np.log(r1 / r0)))
+    seam = grid_map.values[grid_map.kinds == "seam"]
+    assert set(np.abs(seam).astype(int)) <= {0, n_theta}  # the period across the cut
+    quads = extract.extract_quads(grid_map)
+    assert quads.num_quads == n_theta * n_r
+    assert check_quad_mesh(quads.points, quads.quads) == []
+    quality = quad_quality(quads.points, quads.quads)
+    assert quality["irregular_vertices"] == 0
+    assert quality["interior_valence"] == ({"4": n_theta * (n_r - 1)} if n_r > 1 else {})
+    # the corners on n_r + 1 circles r0 (r1/r0)^(k/n_r), n_θ on each
+    r = np.hypot(*quads.points.T)
+    k = np.log(r / r0) / np.log(r1 / r0) * n_r
+    assert np.abs(k - np.rint(k)).max() < 0.05
+    assert np.bincount(np.rint(k).astype(int)).tolist() == [n_theta] * (n_r + 1)
+
+
+def test_too_coarse_a_grid_is_refused():
+    """At s = 0.4 the annulus is 0.28 quads wide: its two circles round to one line."""
+    x, cells = annulus(8, 48)
+    mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    with pytest.raises(quantise.QuantisationError, match="folds .* quad size"):
+        quantise.quantise(mesh, 0.4)
+
+
+def test_quantised_functionals_are_integers_and_rounding_is_cheap():
+    x, cells = annulus(12, 72)
+    mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    grid_map = quantise.quantise(mesh, 6.0)
+    F = grid_map.functionals
+    values = F @ grid_map.param.uv.ravel()
+    assert np.abs(values - np.rint(values)).max() < 1e-6
+    # the rounding moves the radial count 6 ln 2 = 4.16 to 4: a small energy increase
+    assert 0 < grid_map.energy_increase < 0.01
+
+
+def test_scale_for_quad_size_gives_that_mean_edge():
+    x, cells = grid(12, 12, 0, 2, 0, 1)
+    mesh = cut.cut_mesh(x, cells, constant_field(x, (1.0, 0.5)))
+    scale = seamless.scale_for_quad_size(mesh, 0.1)
+    quads = extract.extract_quads(quantise.quantise(mesh, scale))
+    mean = quad_quality(quads.points, quads.quads)["mean_edge_length"]
+    assert mean == pytest.approx(0.1, rel=0.05)
