@@ -6,7 +6,8 @@ constraints (:mod:`~ufl_frames.param.seamless`), these quantities become integer
 
 * the translation t of every seam, (U, V)_g = Rot^j (U, V)_f + t;
 * the constant coordinate of every boundary curve (U = i or V = j along it);
-* both coordinates of every singular vertex (it becomes a grid vertex of valence 4 − turns).
+* both coordinates of every singular vertex (it becomes a grid vertex of valence 4 − turns)
+  and of every boundary cusp (a boundary turning back by 180°: :func:`cusps`).
 
 They are linear functionals F x of the wedge values, F y in the free unknowns y of the
 least-squares problem. With N = (AT)ᵀ(AT) its normal matrix, fixing a set S of them to the
@@ -45,6 +46,12 @@ __all__ = ["IntegerGridMap", "QuantisationError", "integer_functionals", "quanti
 #: A functional is determined by those fixed when its conditional variance falls below
 #: this share of its own (it then equals an integer combination of integers).
 DETERMINED = 1e-9
+#: A functional the fixed ones determine is taken to be off its integer beyond this.
+PARITY_TOLERANCE = 1e-4
+#: A triangle whose image is this much smaller than the median one's counts as collapsed.
+COLLAPSED = 1e-6
+#: Rounds of re-weighting the folded triangles, and the factor of each.
+REWEIGHTINGS, REWEIGHT_FACTOR = 4, 10.0
 #: Largest distance to an integer an integer functional may keep after the final solve.
 INTEGER_TOLERANCE = 1e-6
 
@@ -110,6 +117,27 @@ def anchor_wedge(mesh: CutMesh) -> int:
     return int(corners[0]) if corners.size else int(wa[0])
 
 
+def interior_angles(mesh: CutMesh) -> np.ndarray:
+    """The angle of the domain at every vertex (n,): the sum of its triangles' angles
+    (2π inside, the corner angle on the boundary)."""
+    p = mesh.x[mesh.cells]  # (m, 3, 2)
+    angle = np.zeros(mesh.x.shape[0])
+    for i in range(3):
+        a, b = p[:, (i + 1) % 3] - p[:, i], p[:, (i + 2) % 3] - p[:, i]
+        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        np.add.at(angle, mesh.cells[:, i], np.arctan2(np.abs(cross), np.einsum("mk,mk->m", a, b)))
+    return angle
+
+
+def cusps(mesh: CutMesh) -> np.ndarray:
+    """Boundary vertices where the boundary turns back on itself (the domain's angle
+    under 45° or over 315°, a trailing edge, a slit's end): the same coordinate is constant
+    on both sides, yet the vertex must be a grid point (the boundary turns by 180°)."""
+    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
+    angle = interior_angles(mesh)[boundary]
+    return boundary[(angle < np.pi / 4) | (angle > 7 * np.pi / 4)]
+
+
 def integer_functionals(mesh: CutMesh) -> tuple[sp.csr_matrix, np.ndarray]:
     """F (K, 2W): the rows of every quantity that must be an integer, and their kinds
     ('boundary', 'singular', 'seam'). Unknown 2w + c is coordinate c of wedge w."""
@@ -126,6 +154,11 @@ def integer_functionals(mesh: CutMesh) -> tuple[sp.csr_matrix, np.ndarray]:
     wa, _, coordinate = _boundary_wedges(mesh)
     for w, c in zip(wa, coordinate, strict=True):
         add([(2 * w + c, 1.0)], "boundary")
+    for v in cusps(mesh):  # both coordinates: the vertex is a corner of the grid
+        face = int(np.flatnonzero(np.any(mesh.cells == v, axis=1))[0])
+        w = wedge_of(mesh, face, int(v))
+        for c in range(2):
+            add([(2 * w + c, 1.0)], "boundary")
     for v in mesh.singular:
         face = int(np.flatnonzero(np.any(mesh.cells == v, axis=1))[0])
         w = wedge_of(mesh, face, int(v))
@@ -175,38 +208,85 @@ def _covariance(lu, Fy: sp.csr_matrix, block: int = 256) -> np.ndarray:
 
 def _greedy(mean: np.ndarray, G: np.ndarray, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Fix the functionals one at a time, cheapest rounding first within the lowest open
-    ``phase``; return the fixed ones (indices, in order) and the integer of every one."""
+    ``phase``; return the fixed ones (indices, in order) and the integer of every one.
+
+    A rounding that would leave a functional it determines at a non-integer (a parity:
+    around a boundary loop whose seams flip a coordinate's sign, 2 a = an integer
+    combination of the singular vertices) is replaced by the other neighbouring integer,
+    or, if that fails too, postponed until the other functionals are fixed.
+    """
     mean, C = mean.copy(), G.copy()
     own = np.maximum(np.diag(G).copy(), 1e-300)
     open_ = np.ones(mean.size, dtype=bool)
     fixed = []
+
+    def trial(i, value):
+        column = C[:, i].copy()
+        new_mean = mean + column * ((value - mean[i]) / C[i, i])
+        new_var = np.diag(C) - column**2 / C[i, i]
+        follows = open_ & (new_var <= DETERMINED * own)
+        follows[i] = False
+        fractional = np.abs(new_mean[follows] - np.rint(new_mean[follows]))
+        return column, new_mean, not np.any(fractional > PARITY_TOLERANCE)
+
     while open_.any():
-        idx = np.flatnonzero(open_ & (phase == phase[open_].min()))
+        idx = np.flatnonzero(open_)
         var = np.diag(C)[idx]
         determined = var <= DETERMINED * own[idx]
         open_[idx[determined]] = False
-        idx, var = idx[~determined], var[~determined]
+        idx = np.flatnonzero(open_)
         if idx.size == 0:
             break
-        shift = np.rint(mean[idx]) - mean[idx]
-        i = int(idx[np.argmin(shift**2 / var)])
-        r = np.rint(mean[i]) - mean[i]
-        column = C[:, i].copy()
-        mean += column * (r / C[i, i])
+        lowest = phase[idx].min()
+        order = sorted(idx, key=lambda i: (phase[i] != lowest,
+                                           (np.rint(mean[i]) - mean[i]) ** 2 / C[i, i]))
+        for i in order:
+            nearest = np.rint(mean[i])
+            other = nearest + (1.0 if mean[i] > nearest else -1.0)
+            for value in (nearest, other):
+                column, new_mean, consistent = trial(i, value)
+                if consistent:
+                    break
+            if consistent:
+                break
+        else:
+            raise QuantisationError(
+                "no rounding of the seams, boundary curves and singular vertices is "
+                "consistent (every choice leaves a determined quantity at a half-integer)")
+        mean = new_mean
         C -= np.outer(column, column) / C[i, i]
-        mean[i] = np.rint(mean[i])
+        mean[i] = value
         open_[i] = False
-        fixed.append(i)
+        fixed.append(int(i))
     return np.array(fixed, dtype=np.int64), np.rint(mean)
+
+
+def _folded(param: Parametrisation) -> np.ndarray:
+    """Triangles where the map folds or collapses: det ∇(U, V) ≤ :data:`COLLAPSED` times
+    the median (two corners on one grid point, say two singular vertices rounded together)."""
+    det = param.grad_u[:, 0] * param.grad_v[:, 1] - param.grad_u[:, 1] * param.grad_v[:, 0]
+    return det <= COLLAPSED * np.median(np.abs(det))
+
+
+def _constrained_solve(AT, b, row_weight, F_fixed, d) -> np.ndarray:
+    """argmin ‖W (AT y − b)‖ subject to F_fixed y = d (W = diag(row_weight))."""
+    WA = sp.diags(row_weight) @ AT
+    lu = spla.splu((WA.T @ WA).tocsc())
+    y0 = lu.solve(WA.T @ (row_weight * b))
+    Z = lu.solve(F_fixed.T.toarray())
+    mu = np.linalg.solve(F_fixed @ Z, F_fixed @ y0 - d)
+    return y0 - Z @ mu
 
 
 def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     """The integer-grid map of ``mesh``'s combed field at scale ``scale`` (quads of edge
     |u|/s): seamless least squares with the integer functionals rounded greedily.
 
-    Raises :class:`QuantisationError` where the rounded map folds (a triangle with
-    det ∇(U, V) ≤ 0): the grid is too coarse for the field's singularities or its narrow
-    parts at this scale.
+    Where the rounded map folds (a triangle with det ∇(U, V) ≤ 0), the folded triangles
+    and their neighbours are weighted up (× :data:`REWEIGHT_FACTOR`, at most
+    :data:`REWEIGHTINGS` times) and the map solved again with the same integers. Raises
+    :class:`QuantisationError` if it still folds: the grid is too coarse for the field's
+    singularities or its narrow parts at this scale.
     """
     anchor = anchor_wedge(mesh)
     AT, b, T = least_squares_system(mesh, scale, anchor)
@@ -220,6 +300,7 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     Fk = Fy[keep]
     y = y0
     rounded, max_shift = 0, 0.0
+    fixed = np.zeros(0, dtype=np.int64)
     if keep.size:
         G = _covariance(lu, Fk)
         mean = Fk @ y0
@@ -232,8 +313,18 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
             mu = np.linalg.solve(G[np.ix_(fixed, fixed)], residual)
             y = y0 - lu.solve(Fk[fixed].T @ mu)
             max_shift = float(np.abs(residual).max())
-    x = T @ y
-    values = F @ x
+    param = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
+    weight = np.ones(mesh.cells.shape[0])
+    for _ in range(REWEIGHTINGS):
+        folded = _folded(param)
+        if not folded.any() or not keep.size or not fixed.size:
+            break
+        # the folded triangles and their neighbours count more: the map unfolds there
+        near = np.isin(mesh.cells, mesh.cells[folded]).any(axis=1)
+        weight[near] *= REWEIGHT_FACTOR
+        y = _constrained_solve(AT, b, np.repeat(weight, 4), Fk[fixed], target[fixed])
+        param = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
+    values = F @ param.uv.ravel()
     off = np.abs(values - np.rint(values))
     if off.size and off.max() > INTEGER_TOLERANCE:
         worst = int(np.argmax(off))
@@ -241,13 +332,12 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
             f"the rounding left a {kinds[worst]} quantity {off.max():.2g} away from an integer "
             "(the integer constraints conflict)")
     values = np.rint(values)
-    param = parametrisation(mesh, x.reshape(-1, 2), scale)
-    det = param.grad_u[:, 0] * param.grad_v[:, 1] - param.grad_u[:, 1] * param.grad_v[:, 0]
-    folded = int(np.count_nonzero(det <= 0))
+    folded = int(np.count_nonzero(_folded(param)))
     if folded:
         raise QuantisationError(
-            f"the integer-grid map folds {folded} of {det.size} triangles at this quad size: "
-            "the grid is too coarse for the field's singularities or narrow parts; "
+            f"the integer-grid map folds or collapses {folded} of {mesh.cells.shape[0]} "
+            "triangles at this "
+            "quad size: the grid is too coarse for the field's singularities or narrow parts; "
             "take a smaller quad size")
     target_energy = float(np.dot(b, b))
     before = float(np.sum((AT @ y0 - b) ** 2))

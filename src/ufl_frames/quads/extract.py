@@ -116,6 +116,12 @@ def extract_quads(grid_map: IntegerGridMap) -> QuadMesh:
     mesh = grid_map.mesh
     P = fixed_point(grid_map)
     x, cells, corners = mesh.x, mesh.cells, mesh.corners
+    C = P[corners]
+    det = ((C[:, 1, 0] - C[:, 0, 0]) * (C[:, 2, 1] - C[:, 0, 1])
+           - (C[:, 1, 1] - C[:, 0, 1]) * (C[:, 2, 0] - C[:, 0, 0]))
+    if np.any(det <= 0):
+        raise ExtractionError(f"{int(np.count_nonzero(det <= 0))} triangles fold or collapse "
+                              "in the integer-grid map")
     edge_of = {}
     for e, (a, b) in enumerate(mesh.edges):
         edge_of[(int(a), int(b))] = e
