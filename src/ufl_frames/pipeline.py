@@ -188,23 +188,24 @@ class FrameField:
         self.quad_quality = self._on_root(work, "cannot make quads of this field")
         return self.quad_quality
 
-    def write_quads(self, out, label: str) -> list[str]:
-        """``quads.msh`` (Gmsh MSH 4.1), ``quads.vtu`` and ``quads.png`` of the last
+    def write_quads(self, out, label: str, stem: str = "quads") -> list[str]:
+        """``<stem>.msh`` (Gmsh MSH 4.1), ``<stem>.vtu`` and ``<stem>.png`` of the last
         :meth:`quadrangulate` into ``out``."""
         from ufl_frames.quads.measures import scaled_jacobians
         from ufl_frames.quads.msh import plot_quads, write_quad_msh, write_quad_vtu
 
+        names = [f"{stem}.msh", f"{stem}.vtu", f"{stem}.png"]
         if self.domain.comm.rank == 0:
             mesh, quality = self.quad_mesh, self.quad_quality
             out = Path(out)
-            write_quad_msh(out / "quads.msh", mesh.points, mesh.quads)
-            write_quad_vtu(out / "quads.vtu", mesh.points, mesh.quads,
+            write_quad_msh(out / names[0], mesh.points, mesh.quads)
+            write_quad_vtu(out / names[1], mesh.points, mesh.quads,
                            {"scaled_jacobian": scaled_jacobians(mesh.points, mesh.quads)})
             title = (f"{label}: {quality['quads']} quads, {quality['irregular_vertices']} "
                      f"irregular vertices, min SJ {quality['min_sj']:.2f}")
-            plot_quads(out / "quads.png", mesh.points, mesh.quads, title=title)
+            plot_quads(out / names[2], mesh.points, mesh.quads, title=title)
         self.domain.comm.Barrier()
-        return ["quads.msh", "quads.vtu", "quads.png"]
+        return names
 
     def write_param(self, out, label: str, stem: str = "param") -> list[str]:
         """``<stem>.png`` and ``<stem>.vtu`` of the last :meth:`parametrise` into ``out``."""
