@@ -35,9 +35,11 @@ from ufl_frames.param.cut import CutMesh
 from ufl_frames.param.seamless import (
     Parametrisation,
     boundary_coordinates,
+    folded,
     least_squares_system,
     parametrisation,
     quarter_turn,
+    unfold,
     wedge_of,
 )
 
@@ -48,10 +50,6 @@ __all__ = ["IntegerGridMap", "QuantisationError", "integer_functionals", "quanti
 DETERMINED = 1e-9
 #: A functional the fixed ones determine is taken to be off its integer beyond this.
 PARITY_TOLERANCE = 1e-4
-#: A triangle whose image is this much smaller than the median one's counts as collapsed.
-COLLAPSED = 1e-6
-#: Rounds of re-weighting the folded triangles, and the factor of each.
-REWEIGHTINGS, REWEIGHT_FACTOR = 4, 10.0
 #: Largest distance to an integer an integer functional may keep after the final solve.
 INTEGER_TOLERANCE = 1e-6
 
@@ -261,30 +259,13 @@ def _greedy(mean: np.ndarray, G: np.ndarray, phase: np.ndarray) -> tuple[np.ndar
     return np.array(fixed, dtype=np.int64), np.rint(mean)
 
 
-def _folded(param: Parametrisation) -> np.ndarray:
-    """Triangles where the map folds or collapses: det ∇(U, V) ≤ :data:`COLLAPSED` times
-    the median (two corners on one grid point, say two singular vertices rounded together)."""
-    det = param.grad_u[:, 0] * param.grad_v[:, 1] - param.grad_u[:, 1] * param.grad_v[:, 0]
-    return det <= COLLAPSED * np.median(np.abs(det))
-
-
-def _constrained_solve(AT, b, row_weight, F_fixed, d) -> np.ndarray:
-    """argmin ‖W (AT y − b)‖ subject to F_fixed y = d (W = diag(row_weight))."""
-    WA = sp.diags(row_weight) @ AT
-    lu = spla.splu((WA.T @ WA).tocsc())
-    y0 = lu.solve(WA.T @ (row_weight * b))
-    Z = lu.solve(F_fixed.T.toarray())
-    mu = np.linalg.solve(F_fixed @ Z, F_fixed @ y0 - d)
-    return y0 - Z @ mu
-
-
 def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     """The integer-grid map of ``mesh``'s combed field at scale ``scale`` (quads of edge
     |u|/s): seamless least squares with the integer functionals rounded greedily.
 
     Where the rounded map folds (a triangle with det ∇(U, V) ≤ 0), the folded triangles
-    and their neighbours are weighted up (× :data:`REWEIGHT_FACTOR`, at most
-    :data:`REWEIGHTINGS` times) and the map solved again with the same integers. Raises
+    and their neighbours are weighted up and the map solved again with the same integers
+    (:func:`~ufl_frames.param.seamless.unfold`). Raises
     :class:`QuantisationError` if it still folds: the grid is too coarse for the field's
     singularities or its narrow parts at this scale.
     """
@@ -313,17 +294,10 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
             mu = np.linalg.solve(G[np.ix_(fixed, fixed)], residual)
             y = y0 - lu.solve(Fk[fixed].T @ mu)
             max_shift = float(np.abs(residual).max())
-    param = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
-    weight = np.ones(mesh.cells.shape[0])
-    for _ in range(REWEIGHTINGS):
-        folded = _folded(param)
-        if not folded.any() or not keep.size or not fixed.size:
-            break
-        # the folded triangles and their neighbours count more: the map unfolds there
-        near = np.isin(mesh.cells, mesh.cells[folded]).any(axis=1)
-        weight[near] *= REWEIGHT_FACTOR
-        y = _constrained_solve(AT, b, np.repeat(weight, 4), Fk[fixed], target[fixed])
-        param = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
+    if fixed.size:
+        param, _ = unfold(mesh, AT, b, T, y, scale, Fk[fixed], target[fixed])
+    else:
+        param, _ = unfold(mesh, AT, b, T, y, scale)
     values = F @ param.uv.ravel()
     off = np.abs(values - np.rint(values))
     if off.size and off.max() > INTEGER_TOLERANCE:
@@ -332,16 +306,19 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
             f"the rounding left a {kinds[worst]} quantity {off.max():.2g} away from an integer "
             "(the integer constraints conflict)")
     values = np.rint(values)
-    folded = int(np.count_nonzero(_folded(param)))
-    if folded:
+    bad = int(np.count_nonzero(folded(param)))
+    if bad:
         raise QuantisationError(
-            f"the integer-grid map folds or collapses {folded} of {mesh.cells.shape[0]} "
-            "triangles at this "
-            "quad size: the grid is too coarse for the field's singularities or narrow parts; "
-            "take a smaller quad size")
-    target_energy = float(np.dot(b, b))
-    before = float(np.sum((AT @ y0 - b) ** 2))
-    after = float(np.sum((AT @ y - b) ** 2))
+            f"the integer-grid map folds or collapses {bad} of {mesh.cells.shape[0]} "
+            "triangles at this quad size: the grid is too coarse for the field's "
+            "singularities or narrow parts; take a smaller quad size")
+    increase = (_misfit_energy(param) - _misfit_energy(seamless)) / max(float(b @ b), 1e-300)
     return IntegerGridMap(param=param, seamless=seamless, functionals=F, values=values,
                           kinds=kinds, rounded=rounded, max_shift=max_shift,
-                          energy_increase=(after - before) / max(target_energy, 1e-300))
+                          energy_increase=increase)
+
+
+def _misfit_energy(p: Parametrisation) -> float:
+    """Σ_f |f| (|∇U − s ũ|² + |∇V − s ṽ|²): the least squares' objective."""
+    return float(np.dot(p.area, np.sum((p.grad_u - p.target_u) ** 2, axis=1)
+                        + np.sum((p.grad_v - p.target_v) ** 2, axis=1)))

@@ -33,7 +33,7 @@ from ufl_frames.param.cut import CutMesh
 
 __all__ = ["Parametrisation", "boundary_coordinates", "gradients", "integrate",
            "least_squares_system", "parametrisation", "quarter_turn", "scale_for_quad_count",
-           "scale_for_quad_size", "targets", "wedge_of"]
+           "scale_for_quad_size", "targets", "unfold", "weighted_solve", "wedge_of", "folded"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -230,9 +230,57 @@ def parametrisation(mesh: CutMesh, uv: np.ndarray, scale: float) -> Parametrisat
                            target_u=target_u, target_v=target_v, area=area)
 
 
-def integrate(mesh: CutMesh, scale: float = 1.0, anchor: int = 0) -> Parametrisation:
+#: A triangle whose image is this much smaller than the median one's counts as collapsed.
+COLLAPSED = 1e-6
+#: Rounds of re-weighting folded triangles (:func:`unfold`), and the factor of each.
+REWEIGHTINGS, REWEIGHT_FACTOR = 4, 10.0
+
+
+def folded(p: Parametrisation) -> np.ndarray:
+    """Triangles where the map folds or collapses: det ∇(U, V) ≤ :data:`COLLAPSED` times
+    the median (two corners on one point, say two singular vertices rounded together)."""
+    det = p.grad_u[:, 0] * p.grad_v[:, 1] - p.grad_u[:, 1] * p.grad_v[:, 0]
+    return det <= COLLAPSED * np.median(np.abs(det))
+
+
+def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarray:
+    """argmin Σ_f w_f (misfit of triangle f)² over y, subject to F_fixed y = d if given
+    (``weight`` per triangle; AT, b of :func:`least_squares_system`)."""
+    row_weight = np.sqrt(np.repeat(weight, 4))
+    WA = sp.diags(row_weight) @ AT
+    lu = spla.splu((WA.T @ WA).tocsc())
+    y0 = lu.solve(WA.T @ (row_weight * b))
+    if F_fixed is None or F_fixed.shape[0] == 0:
+        return y0
+    Z = lu.solve(F_fixed.T.toarray())
+    mu = np.linalg.solve(F_fixed @ Z, F_fixed @ y0 - d)
+    return y0 - Z @ mu
+
+
+def unfold(mesh: CutMesh, AT, b, T, y, scale: float, F_fixed=None, d=None):
+    """Re-weight the folded triangles and their neighbours (× :data:`REWEIGHT_FACTOR`, at
+    most :data:`REWEIGHTINGS` rounds) and solve again, until nothing folds: a fold is where
+    the least squares traded orientation for misfit, and a larger weight there buys it
+    back. Returns the :class:`Parametrisation` and the number of triangles re-weighted."""
+    p = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
+    weight = np.ones(mesh.cells.shape[0])
+    for _ in range(REWEIGHTINGS):
+        bad = folded(p)
+        if not bad.any():
+            break
+        near = np.isin(mesh.cells, mesh.cells[bad]).any(axis=1)
+        weight[near] *= REWEIGHT_FACTOR
+        y = weighted_solve(AT, b, weight, F_fixed, d)
+        p = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
+    return p, int(np.count_nonzero(weight > 1))
+
+
+def integrate(mesh: CutMesh, scale: float = 1.0, anchor: int = 0,
+              unfold_folds: bool = True) -> Parametrisation:
     """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``, zero
-    at wedge ``anchor``."""
+    at wedge ``anchor``; with ``unfold_folds``, folded triangles re-weighted (:func:`unfold`)."""
     AT, b, T = least_squares_system(mesh, scale, anchor)
     y = spla.spsolve((AT.T @ AT).tocsc(), AT.T @ b)
+    if unfold_folds:
+        return unfold(mesh, AT, b, T, y, scale)[0]
     return parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
