@@ -28,7 +28,8 @@ import numpy as np
 
 from ufl_frames.quads.measures import _arrays, scaled_jacobians, vertex_valence
 
-__all__ = ["gmsh_quality", "plot_quads", "write_quad_msh", "write_quad_vtu"]
+__all__ = ["gmsh_quality", "mesh_boundary_edges", "plot_quads", "write_quad_msh",
+           "write_quad_vtu"]
 
 #: Physical group tags of :func:`write_quad_msh`.
 DOMAIN_TAG = 1
@@ -71,7 +72,7 @@ def _gmsh_model(name: str):
                     gmsh.option.setNumber(key, value)
 
 
-def boundary_edges(quads) -> np.ndarray:
+def mesh_boundary_edges(quads) -> np.ndarray:
     """Edges (k, 2) in one quad only, directed as in their quad (domain on the left)."""
     q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
     directed = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
@@ -102,18 +103,19 @@ def _add_quads(gmsh, x: np.ndarray, q: np.ndarray, lines: np.ndarray) -> tuple[i
     return surface, curve
 
 
-def write_quad_msh(path, points, quads, boundary=None) -> Path:
+def write_quad_msh(path, points, quads, boundary_edges=None) -> Path:
     """Write the quad mesh as Gmsh MSH 4.1 (ASCII) to ``path`` (a ``.msh`` file).
 
-    ``boundary`` (k, 2): the point pairs written as boundary lines (physical group
-    ``boundary``); None: the mesh's boundary edges (:func:`boundary_edges`); an empty
+    ``boundary_edges`` (k, 2): the point pairs written as boundary lines (physical group
+    ``boundary``); None: the mesh's boundary edges (:func:`mesh_boundary_edges`); an empty
     array: no lines and no boundary group. Node i is Gmsh node i + 1, quad j element j + 1.
     """
     path = Path(path)
     if path.suffix.lower() != ".msh":
         raise ValueError(f"write_quad_msh writes .msh files, got {str(path)!r}")
     x, q = _arrays(points, quads)
-    lines = boundary_edges(q) if boundary is None else np.asarray(boundary, dtype=np.int64)
+    lines = (mesh_boundary_edges(q) if boundary_edges is None
+             else np.asarray(boundary_edges, dtype=np.int64))
     lines = lines.reshape(-1, 2)
     if lines.size and (lines.min() < 0 or lines.max() >= x.shape[0]):
         raise ValueError(f"boundary edges index points outside 0..{x.shape[0] - 1}")

@@ -1,0 +1,579 @@
+"""Quad meshes of planar shapes: Gmsh's quad meshers next to ufl_frames' quads.
+
+    python benchmarks/quads.py [--shapes NAME_OR_FILE ...] [--quads 400 | --quad-size S]
+                               [--methods qs blossom fullquad ufl_frames] [--json FILE]
+                               [--out DIR] [--mesh-size H] [--timeout 600]
+                               [--gmsh-timeout 300] [--area-rtol 0.02]
+
+Shapes: every ``benchmarks/shapes/*.geo`` (each says in its first comment what it
+exercises) and ``meshes/annulus.geo``, ``meshes/piano.geo``, named by their stem;
+``--shapes`` picks some by name or takes any geometry file.
+
+Methods (``--methods``, default all but ``simple`` and ``delaunay``):
+
+* ``qs``: Gmsh's quasi-structured quads (``Mesh.Algorithm = 11``);
+* ``blossom``: Frontal-Delaunay for quads (``Mesh.Algorithm = 8``) recombined
+  (``Mesh.RecombineAll = 1``) with Gmsh's default ``Mesh.RecombinationAlgorithm`` (1,
+  Blossom);
+* ``fullquad``: the same with ``Mesh.RecombinationAlgorithm = 3`` (Blossom full-quad);
+* ``simple``: the same with ``Mesh.RecombinationAlgorithm = 0`` (simple; may leave
+  triangles); ``delaunay``: Gmsh's default 2D algorithm (6) recombined by default;
+* ``ufl_frames``: ``ufl-frames solve SHAPE --quads --quad-size S --out DIR --force -q``
+  in a subprocess (``--mesh-size H`` passed on when given); its ``summary.json`` object
+  ``"quads"`` (the keys of :func:`ufl_frames.quads.measures.quad_quality` plus ``valid``
+  and ``seconds``) is reported, and ``DIR/quads.msh`` is measured again here. A run that
+  fails (the option not there yet, say) shows "not available" and its one-line error.
+
+Size: the target is ``--quads`` quads (default 400), or area / S² with ``--quad-size S``;
+ufl_frames gets ``--quad-size`` S = √(area / target). Gmsh meshes with
+``Mesh.MeshSizeMax`` = h from a first guess per method, then h is rescaled by
+√(quads / target) (the count goes as 1/h²) at most twice, until within 10 %. The Gmsh
+runs use the project's loader settings for curves (at least 12 points per full circle, 8
+per other curve; ``ufl_frames.geometry``). Every Gmsh run is a subprocess of this script
+(``--gmsh-timeout``, default 300 s: algorithm 11 can hang); the time reported is that of
+``gmsh.model.mesh.generate(2)`` at the final size.
+
+Measures: :func:`~ufl_frames.quads.measures.quad_quality` (irregular vertices, scaled
+Jacobian, edge ratio) and :func:`~ufl_frames.quads.measures.check_quad_mesh` (valid:
+conforming, counter-clockwise, manifold, no triangles left, area within ``--area-rtol``
+(default 2 %, the polygonal boundary's deficit) of the exact CAD area). Each surface's
+quads are turned counter-clockwise first if Gmsh gave them clockwise (whole surfaces, so
+an inverted quad stays inverted).
+
+Output: a table per shape, then a summary (on how many shapes each method has the fewest
+irregular vertices, the best min and mean SJ, ...: ties count for every tied method,
+valid meshes only); ``--json FILE`` writes everything; a picture of every mesh
+(:func:`~ufl_frames.quads.msh.plot_quads`) and its ``.msh`` go to ``--out`` (default
+``benchmarks/out/quads``, git-ignored).
+"""
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+SHAPES = ROOT / "benchmarks" / "shapes"
+BUILTIN = {"annulus": ROOT / "meshes" / "annulus.geo", "piano": ROOT / "meshes" / "piano.geo"}
+GEOMETRY_SUFFIXES = (".geo", ".msh", ".step", ".stp", ".brep")
+
+#: Gmsh options per method, and the first guess of MeshSizeMax in units of √(area/target).
+GMSH_METHODS = {
+    "qs": ({"Mesh.Algorithm": 11, "Mesh.RecombineAll": 0}, 2.3),
+    "blossom": ({"Mesh.Algorithm": 8, "Mesh.RecombineAll": 1}, 1.06),
+    "fullquad": ({"Mesh.Algorithm": 8, "Mesh.RecombineAll": 1,
+                  "Mesh.RecombinationAlgorithm": 3}, 1.06),
+    "simple": ({"Mesh.Algorithm": 8, "Mesh.RecombineAll": 1,
+                "Mesh.RecombinationAlgorithm": 0}, 1.06),
+    "delaunay": ({"Mesh.RecombineAll": 1}, 1.06),
+}
+DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames")
+ALL_METHODS = (*GMSH_METHODS, "ufl_frames")
+#: Loader settings for curves (ufl_frames.geometry.CURVE_POINTS_PER_TURN / _PER_CURVE).
+CURVE_OPTIONS = {"Mesh.MinimumCirclePoints": 12, "Mesh.MinimumCurvePoints": 8}
+RESCALES = 2
+WITHIN = 0.10
+
+
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
+# --- one Gmsh run (in a subprocess: --worker) -------------------------------------------
+
+
+def _merge(path: Path) -> None:
+    """Load ``path`` into the current Gmsh model; its errors raised as one line."""
+    import gmsh
+
+    gmsh.option.setNumber("General.AbortOnError", 0)
+    gmsh.logger.start()
+    try:
+        gmsh.merge(str(path))
+        errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
+    finally:
+        gmsh.logger.stop()
+    if errors:
+        raise RuntimeError(_one_line(errors[0]).removeprefix("Error: "))
+
+
+def _cad_area() -> float:
+    """Exact area of the OpenCASCADE surfaces, else of a fine triangle mesh."""
+    import gmsh
+
+    surfaces = gmsh.model.getEntities(2)
+    if surfaces and sorted(gmsh.model.occ.getEntities(2)) == sorted(surfaces):
+        return float(sum(gmsh.model.occ.getMass(2, t) for _, t in surfaces))
+    x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(-1, -1)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", math.hypot(x1 - x0, y1 - y0) / 200)
+    gmsh.model.mesh.generate(2)
+    x, quads, triangles = _mesh_arrays()
+    area = 0.0
+    for cells in (quads, triangles):
+        if len(cells):
+            p = x[cells]
+            area += 0.5 * abs(np.sum(p[:, :, 0] * np.roll(p[:, :, 1], -1, axis=1)
+                                     - np.roll(p[:, :, 0], -1, axis=1) * p[:, :, 1]))
+    gmsh.model.mesh.clear()
+    return area
+
+
+def _mesh_arrays():
+    """(points (n, 2), quads (m, 4), triangles (t, 3)) of the current 2D mesh: used nodes
+    only, each surface's cells counter-clockwise (as a whole)."""
+    import gmsh
+
+    if len(gmsh.model.getEntities(2)) > 1:
+        gmsh.model.mesh.removeDuplicateNodes()
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    xyz = coords.reshape(-1, 3)
+    row = np.full(int(tags.max(initial=0)) + 1, -1, dtype=np.int64)
+    row[tags.astype(np.int64)] = np.arange(tags.size)
+    cells = {3: [], 2: []}
+    for _, surface in gmsh.model.getEntities(2):
+        found = {}
+        for kind, _, nodes in zip(*gmsh.model.mesh.getElements(2, surface), strict=True):
+            k = {3: 4, 2: 3}.get(int(kind))
+            if k is None:
+                raise RuntimeError(f"unexpected 2D element type {int(kind)}")
+            found[int(kind)] = row[nodes.astype(np.int64)].reshape(-1, k)
+        signed = 0.0
+        for c in found.values():
+            p = xyz[c][:, :, :2]
+            signed += float(np.sum(p[:, :, 0] * np.roll(p[:, :, 1], -1, axis=1)
+                                   - np.roll(p[:, :, 0], -1, axis=1) * p[:, :, 1]))
+        for kind, c in found.items():
+            cells[kind].append(c[:, ::-1] if signed < 0 else c)
+    quads = np.concatenate(cells[3]) if cells[3] else np.zeros((0, 4), np.int64)
+    triangles = np.concatenate(cells[2]) if cells[2] else np.zeros((0, 3), np.int64)
+    used, inverse = np.unique(np.concatenate([quads.ravel(), triangles.ravel()]),
+                              return_inverse=True)
+    inverse = inverse.ravel()
+    return (xyz[used, :2], inverse[:quads.size].reshape(-1, 4),
+            inverse[quads.size:].reshape(-1, 3))
+
+
+def _count_quads() -> tuple[int, int]:
+    import gmsh
+
+    counts = {2: 0, 3: 0}
+    for _, surface in gmsh.model.getEntities(2):
+        for kind, tags, _ in zip(*gmsh.model.mesh.getElements(2, surface), strict=True):
+            counts[int(kind)] = counts.get(int(kind), 0) + len(tags)
+    return counts[3], counts[2]
+
+
+def gmsh_run(path: Path, method: str, quads: float, quad_size: float | None,
+             out: Path | None, stem: str, area_rtol: float) -> dict:
+    """Gmsh's quads of ``path`` with ``method`` at about ``quads`` quads (area /
+    ``quad_size``² if given), measured."""
+    import gmsh
+
+    from ufl_frames.quads.measures import check_quad_mesh, quad_quality
+    from ufl_frames.quads.msh import plot_quads
+
+    options, guess = GMSH_METHODS[method]
+    gmsh.initialize(argv=[], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        _merge(path)
+        area = _cad_area()
+        target = area / quad_size**2 if quad_size else quads
+
+        def generate(h):  # in a fresh model: algorithm 11 keeps its sizes between calls
+            gmsh.clear()
+            _merge(path)
+            for key, value in {**CURVE_OPTIONS, **options, "Mesh.SubdivisionAlgorithm": 0,
+                               "Mesh.ElementOrder": 1, "Mesh.MeshSizeMax": h}.items():
+                gmsh.option.setNumber(key, value)
+            gmsh.logger.start()
+            start = time.perf_counter()
+            try:
+                gmsh.model.mesh.generate(2)  # errors are logged (General.AbortOnError 0)
+                seconds = time.perf_counter() - start
+                errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
+            finally:
+                gmsh.logger.stop()
+            if errors:
+                return {"mesh_size": h, "error": _one_line(errors[0]).removeprefix("Error: ")}
+            quads, triangles = _count_quads()
+            return {"mesh_size": h, "quads": quads, "triangles": triangles, "seconds": seconds}
+
+        # Rescale until within WITHIN of the target; a size Gmsh fails at is nudged by 5 %
+        # (the full-quad Blossom needs an even number of boundary edges per loop).
+        tries = [generate(guess * math.sqrt(area / target))]
+        while len(tries) <= RESCALES + 2:
+            last = tries[-1]
+            if "error" in last:
+                tries.append(generate(last["mesh_size"] * 1.05))
+            elif last["quads"] and abs(last["quads"] / target - 1) > WITHIN:
+                tries.append(generate(last["mesh_size"] * math.sqrt(last["quads"] / target)))
+            else:
+                break
+            if sum("error" not in t for t in tries) > RESCALES:
+                break
+        done = [t for t in tries if "error" not in t]
+        if not done:
+            sizes = ", ".join(f"{t['mesh_size']:.3g}" for t in tries)
+            raise RuntimeError(f"Gmsh failed at sizes {sizes}: {tries[0]['error']}")
+        best = min(done, key=lambda t: abs(math.log(max(t["quads"], 1) / target)))
+        final = best if best is tries[-1] else generate(best["mesh_size"])
+        h, seconds = final["mesh_size"], final["seconds"]
+        x, q, t = _mesh_arrays()
+        used, q = np.unique(q, return_inverse=True)  # the quads' points only
+        x, q = x[used], q.reshape(-1, 4)
+        total = sum(t.get("seconds", 0) for t in tries) + (0 if final is best else final["seconds"])
+        row = {"method": method, "status": "ok", "target": target, "mesh_size": h,
+               "seconds": seconds, "total_s": total, "tries": tries, "area_exact": area,
+               "triangles": int(len(t))}
+        if len(q) == 0:
+            return {**row, "status": "failed", "error": "no quads"}
+        problems = check_quad_mesh(x, q, area=area, rtol=area_rtol)
+        if len(t):
+            problems.insert(0, f"{len(t)} triangles left")
+        quality = quad_quality(x, q)
+        row.update(quality=quality, valid=not problems, problems=problems,
+                   area_error=quality["area"] / area - 1)
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            gmsh.write(str(out / f"{stem}.msh"))
+            row["picture"] = str(plot_quads(
+                out / f"{stem}.png", x, q,
+                title=f"{stem}: {len(q)} quads, {quality['irregular_vertices']} irregular, "
+                f"min SJ {quality['min_sj']:.2f}"))
+        return row
+    finally:
+        gmsh.finalize()
+
+
+# --- the subprocesses -------------------------------------------------------------------
+
+
+def _tool(name: str) -> str | None:
+    beside = Path(sys.executable).parent / name
+    return str(beside) if beside.exists() else shutil.which(name)
+
+
+def _run(cmd: list[str], timeout: float) -> tuple[int | None, str, str, float]:
+    """Run ``cmd`` in its own process group; kill the group on timeout (rc None)."""
+    env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"),
+           "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=ROOT, env=env, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+        rc = proc.returncode
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        rc = None
+    return rc, out, err, time.perf_counter() - start
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return lines[-1] if lines else ""
+
+
+def run_gmsh(path: Path, method: str, args, stem: str, quads: float | None = None) -> dict:
+    """:func:`gmsh_run` in a subprocess (``quads`` overrides the size asked for)."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(path), method,
+           "--area-rtol", repr(args.area_rtol), "--stem", stem]
+    if args.quad_size and quads is None:
+        cmd += ["--quad-size", repr(args.quad_size)]
+    else:
+        cmd += ["--quads", repr(quads or args.quads)]
+    if args.out:
+        cmd += ["--out", str(args.out)]
+    rc, out, err, wall = _run(cmd, args.gmsh_timeout)
+    if rc is None:
+        return {"method": method, "status": "timeout",
+                "error": f"Gmsh ran over {args.gmsh_timeout:g} s"}
+    try:
+        return json.loads(out.strip().splitlines()[-1])
+    except (json.JSONDecodeError, IndexError):
+        return {"method": method, "status": "failed",
+                "error": _last_line(err) or f"exit status {rc}"}
+
+
+def _msh_quads(path: Path):
+    """(points, quads) of the 4-node quads in a ``.msh`` file."""
+    import gmsh
+
+    owns = not gmsh.isInitialized()
+    if owns:
+        gmsh.initialize(argv=[], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("ufl_frames quads")
+        _merge(path)
+        x, q, t = _mesh_arrays()
+        if len(t):
+            raise RuntimeError(f"{len(t)} triangles in {path.name}")
+        return x, q
+    finally:
+        if owns:
+            gmsh.finalize()
+        else:
+            gmsh.model.remove()
+
+
+def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
+                   stem: str) -> dict:
+    """The CLI's quads: its own summary, and quads.msh measured again here."""
+    from ufl_frames.quads.measures import check_quad_mesh, quad_quality
+
+    frames = _tool("ufl-frames")
+    base = [frames] if frames else [sys.executable, "-m", "ufl_frames.cli"]
+    row = {"method": "ufl_frames", "quad_size": quad_size}
+    with tempfile.TemporaryDirectory(prefix="quads_") as tmp:
+        folder = Path(tmp) / "run"
+        cmd = [*base, "solve", argument, "--quads", "--quad-size", repr(quad_size),
+               "--out", str(folder), "--force", "-q"]
+        if args.mesh_size:
+            cmd += ["--mesh-size", repr(args.mesh_size)]
+        rc, _, err, wall = _run(cmd, args.timeout)
+        row["command"] = " ".join(cmd)
+        row["wall_s"] = wall
+        if rc is None:
+            return {**row, "status": "timeout", "error": f"ran over {args.timeout:g} s"}
+        if rc != 0:
+            return {**row, "status": "not available", "error": _last_line(err) or f"exit {rc}"}
+        try:
+            summary = json.loads((folder / "summary.json").read_text())
+            reported = summary["quads"]
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            return {**row, "status": "not available",
+                    "error": f"no 'quads' in summary.json ({_one_line(e)})"}
+        seconds = reported.get("seconds")
+        if isinstance(seconds, dict):  # per step: quantise, extract, ...
+            seconds = sum(v for v in seconds.values() if isinstance(v, int | float))
+        row.update(status="ok", reported=reported, seconds=seconds, total_s=wall,
+                   valid_reported=reported.get("valid"))
+        try:
+            x, q = _msh_quads(folder / "quads.msh")
+        except Exception as e:  # reported, not raised
+            return {**row, "quality": {k: v for k, v in reported.items()
+                                       if k not in ("valid", "seconds")},
+                    "valid": bool(reported.get("valid")),
+                    "problems": [f"quads.msh not measured: {_one_line(e)}"]}
+        quality = quad_quality(x, q)
+        problems = check_quad_mesh(x, q, area=area, rtol=args.area_rtol)
+        mismatch = sorted(k for k, v in quality.items()
+                          if k in reported and not _close(v, reported[k]))
+        row.update(quality=quality, valid=not problems, problems=problems,
+                   summary_mismatch=mismatch)
+        if area:
+            row["area_error"] = quality["area"] / area - 1
+        if args.out:
+            from ufl_frames.quads.msh import plot_quads
+
+            args.out.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(folder / "quads.msh", args.out / f"{stem}.msh")
+            row["picture"] = str(plot_quads(
+                args.out / f"{stem}.png", x, q,
+                title=f"{stem}: {len(q)} quads, {quality['irregular_vertices']} irregular, "
+                f"min SJ {quality['min_sj']:.2f}"))
+    return row
+
+
+def _close(a, b) -> bool:
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k]) for k in a)
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
+    return a == b
+
+
+# --- tables -----------------------------------------------------------------------------
+
+HEADER = (f"  {'method':<11}{'quads':>6}{'tris':>5}{'irreg':>6}{'(int+bnd)':>10}"
+          f"{'minSJ':>7}{'meanSJ':>7}{'SJ>=.8':>7}{'ratio':>6}{'max':>6}{'area err':>9}"
+          f"{'valid':>6}{'time s':>8}{'total s':>8}")
+
+
+def format_row(row: dict) -> str:
+    if "quality" not in row:
+        return f"  {row['method']:<11}{row['status']}: {row.get('error', '')}"
+    m = row["quality"]
+    ratio = m["edge_length_ratio"]
+    split = f"({m['irregular_interior']}+{m['irregular_boundary']})"
+    area = f"{100 * row['area_error']:+8.2f}%" if "area_error" in row else f"{'-':>9}"
+    seconds = row.get("seconds")
+    time_s = "".join(f"{v:8.2f}" if isinstance(v, int | float) else f"{'-':>8}"
+                     for v in (seconds, row.get("total_s")))
+    text = (f"  {row['method']:<11}{m['quads']:>6}{row.get('triangles', 0):>5}"
+            f"{m['irregular_vertices']:>6}{split:>10}{m['min_sj']:>7.3f}{m['mean_sj']:>7.3f}"
+            f"{m['sj_at_least_0_8']:>7.2f}{ratio['mean']:>6.2f}{ratio['max']:>6.1f}{area}"
+            f"{'yes' if row['valid'] else 'NO':>6}{time_s}")
+    if row.get("problems"):
+        text += "\n" + "\n".join(f"      ! {p}" for p in row["problems"])
+    if row.get("summary_mismatch"):
+        text += f"\n      ! summary.json differs from quads.msh in {row['summary_mismatch']}"
+    return text
+
+
+#: (label, key in quality or a function of it, better = max or min)
+CRITERIA = (
+    ("fewest irregular vertices", lambda m: m["irregular_vertices"], min),
+    ("best min SJ", lambda m: m["min_sj"], max),
+    ("best mean SJ", lambda m: m["mean_sj"], max),
+    ("most quads with SJ >= 0.8", lambda m: m["sj_at_least_0_8"], max),
+    ("lowest mean edge ratio", lambda m: m["edge_length_ratio"]["mean"], min),
+)
+
+
+def summarise(shapes: list[dict], methods: list[str]) -> dict:
+    """Per criterion, on how many shapes each method is best (ties count for all; valid
+    meshes only); per method, how many meshes were valid and the totals."""
+    wins = {label: dict.fromkeys(methods, 0) for label, _, _ in CRITERIA}
+    valid = dict.fromkeys(methods, 0)
+    ran = dict.fromkeys(methods, 0)
+    irregular = dict.fromkeys(methods, 0)
+    for shape in shapes:
+        rows = [r for r in shape["rows"] if "quality" in r]
+        for r in rows:
+            ran[r["method"]] += 1
+            valid[r["method"]] += bool(r["valid"])
+            irregular[r["method"]] += r["quality"]["irregular_vertices"]
+        good = [r for r in rows if r["valid"]]
+        if not good:
+            continue
+        for label, value, best in CRITERIA:
+            top = best(value(r["quality"]) for r in good)
+            for r in good:
+                if math.isclose(value(r["quality"]), top, rel_tol=1e-9, abs_tol=1e-12):
+                    wins[label][r["method"]] += 1
+    return {"wins": wins, "valid": valid, "measured": ran, "irregular_total": irregular,
+            "shapes": len(shapes)}
+
+
+def print_summary(summary: dict, methods: list[str]) -> None:
+    width = max(len(label) for label, _, _ in CRITERIA) + 2
+    print(f"\nSummary over {summary['shapes']} shapes (valid meshes only; ties count for each)")
+    print(f"  {'':<{width}}" + "".join(f"{m:>12}" for m in methods))
+    for label, _, _ in CRITERIA:
+        print(f"  {label:<{width}}" + "".join(f"{summary['wins'][label][m]:>12}"
+                                              for m in methods))
+    print(f"  {'valid / measured':<{width}}" + "".join(
+        f"{summary['valid'][m]:>8}/{summary['measured'][m]:<3}" for m in methods))
+    print(f"  {'irregular vertices, total':<{width}}" + "".join(
+        f"{summary['irregular_total'][m]:>12}" for m in methods))
+
+
+# --- main -------------------------------------------------------------------------------
+
+
+def resolve(names: list[str] | None) -> list[tuple[str, Path]]:
+    known = {p.stem: p for p in sorted(SHAPES.glob("*.geo"))} | BUILTIN
+    if not names:
+        return list(known.items())
+    found = []
+    for name in names:
+        path = Path(name)
+        if name in known:
+            found.append((name, known[name]))
+        elif path.suffix.lower() in GEOMETRY_SUFFIXES and path.exists():
+            found.append((path.stem, path.resolve()))
+        else:
+            sys.exit(f"quads.py: unknown shape {name!r} (known: {', '.join(known)}; or a file)")
+    return found
+
+
+def _area(row_list: list[dict]) -> float | None:
+    return next((r["area_exact"] for r in row_list if "area_exact" in r), None)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--shapes", nargs="+", metavar="NAME",
+                        help="shape names (file stems) or geometry files; default: all")
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument("--quads", type=float, default=400.0, metavar="N",
+                      help="target number of quads (default 400)")
+    size.add_argument("--quad-size", type=float, metavar="S",
+                      help="target quad edge length instead: N = area / S^2")
+    parser.add_argument("--methods", nargs="+", choices=ALL_METHODS, default=DEFAULT_METHODS,
+                        metavar="M", help=f"of {', '.join(ALL_METHODS)} "
+                        f"(default {' '.join(DEFAULT_METHODS)})")
+    parser.add_argument("--json", metavar="FILE", help="write all rows to FILE")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "quads",
+                        help="pictures and .msh files (default benchmarks/out/quads)")
+    parser.add_argument("--no-out", action="store_true", help="no pictures, no .msh files")
+    parser.add_argument("--mesh-size", type=float, metavar="H",
+                        help="passed to ufl-frames solve (the frame field's triangles)")
+    parser.add_argument("--timeout", type=float, default=600.0,
+                        help="seconds per ufl-frames run (default 600)")
+    parser.add_argument("--gmsh-timeout", type=float, default=300.0,
+                        help="seconds per Gmsh run (default 300)")
+    parser.add_argument("--area-rtol", type=float, default=0.02,
+                        help="relative area tolerance of the validity check (default 0.02)")
+    parser.add_argument("--worker", nargs=2, metavar=("FILE", "METHOD"),
+                        help=argparse.SUPPRESS)
+    parser.add_argument("--stem", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.no_out:
+        args.out = None
+    if args.worker:  # internal: one JSON line on stdout
+        path, method = args.worker
+        try:
+            row = gmsh_run(Path(path), method, args.quads, args.quad_size, args.out,
+                           args.stem, args.area_rtol)
+        except Exception as e:  # reported, not raised
+            row = {"method": method, "status": "failed", "error": _one_line(e)}
+        print(json.dumps(row))
+        return
+
+    shapes = []
+    gmsh_methods = [m for m in args.methods if m in GMSH_METHODS]
+    for name, path in resolve(args.shapes):
+        print(f"\n{name} ({path.relative_to(ROOT) if path.is_relative_to(ROOT) else path})",
+              flush=True)
+        rows = []
+        area = None
+        for method in gmsh_methods:
+            rows.append(run_gmsh(path, method, args, f"{name}_{method}"))
+            area = area or _area(rows)
+            if len(rows) == 1:
+                print(HEADER, flush=True)
+            print(format_row(rows[-1]), flush=True)
+        if "ufl_frames" in args.methods:
+            if area is None:  # no Gmsh run: ask one for the area only
+                probe = run_gmsh(path, "blossom", argparse.Namespace(
+                    **{**vars(args), "out": None}), f"{name}_probe", quads=50.0)
+                area = probe.get("area_exact")
+            if area is None:
+                rows.append({"method": "ufl_frames", "status": "not available",
+                             "error": "the shape's area is unknown (Gmsh could not load it)"})
+            else:
+                s = args.quad_size or math.sqrt(area / args.quads)
+                rows.append(run_ufl_frames(str(path), s, area, args, f"{name}_ufl_frames"))
+            if len(rows) == 1:
+                print(HEADER)
+            print(format_row(rows[-1]), flush=True)
+        shapes.append({"name": name, "file": str(path), "area": area, "rows": rows})
+    summary = summarise(shapes, list(args.methods))
+    print_summary(summary, list(args.methods))
+    if args.json:
+        Path(args.json).write_text(json.dumps(
+            {"target_quads": args.quads if not args.quad_size else None,
+             "quad_size": args.quad_size, "methods": list(args.methods),
+             "area_rtol": args.area_rtol, "shapes": shapes, "summary": summary},
+            indent=1))
+        print(f"\nwrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()
