@@ -19,6 +19,7 @@ Methods (``--methods``, default all but ``simple`` and ``delaunay``):
 * ``simple``: the same with ``Mesh.RecombinationAlgorithm = 0`` (simple; may leave
   triangles); ``delaunay``: Gmsh's default 2D algorithm (6) recombined by default;
 * ``ufl_frames``: ``ufl-frames solve SHAPE --quads --quad-size S --out DIR --force -q``
+  (general frames, the CLI's default), ``ufl_frames_iso`` the same with ``--isotropic``,
   in a subprocess (``--mesh-size H`` passed on when given); its ``summary.json`` object
   ``"quads"`` (the keys of :func:`ufl_frames.quads.measures.quad_quality` plus ``valid``
   and ``seconds``) is reported, and ``DIR/quads.msh`` is measured again here. A run that
@@ -77,8 +78,10 @@ GMSH_METHODS = {
                 "Mesh.RecombinationAlgorithm": 0}, 1.06),
     "delaunay": ({"Mesh.RecombineAll": 1}, 1.06),
 }
-DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames")
-ALL_METHODS = (*GMSH_METHODS, "ufl_frames")
+#: ufl_frames' two fields: general (non-isotropic, the CLI's default) and isotropic frames.
+UFL_FRAMES_METHODS = {"ufl_frames": [], "ufl_frames_iso": ["--isotropic"]}
+DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames", "ufl_frames_iso")
+ALL_METHODS = (*GMSH_METHODS, *UFL_FRAMES_METHODS)
 #: Loader settings for curves (ufl_frames.geometry.CURVE_POINTS_PER_TURN / _PER_CURVE).
 CURVE_OPTIONS = {"Mesh.MinimumCirclePoints": 12, "Mesh.MinimumCurvePoints": 8}
 RESCALES = 2
@@ -331,17 +334,17 @@ def _msh_quads(path: Path):
 
 
 def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
-                   stem: str) -> dict:
+                   stem: str, method: str = "ufl_frames") -> dict:
     """The CLI's quads: its own summary, and quads.msh measured again here."""
     from ufl_frames.quads.measures import check_quad_mesh, quad_quality
 
     frames = _tool("ufl-frames")
     base = [frames] if frames else [sys.executable, "-m", "ufl_frames.cli"]
-    row = {"method": "ufl_frames", "quad_size": quad_size}
+    row = {"method": method, "quad_size": quad_size}
     with tempfile.TemporaryDirectory(prefix="quads_") as tmp:
         folder = Path(tmp) / "run"
-        cmd = [*base, "solve", argument, "--quads", "--quad-size", repr(quad_size),
-               "--out", str(folder), "--force", "-q"]
+        cmd = [*base, "solve", argument, *UFL_FRAMES_METHODS[method], "--quads",
+               "--quad-size", repr(quad_size), "--out", str(folder), "--force", "-q"]
         if args.mesh_size:
             cmd += ["--mesh-size", repr(args.mesh_size)]
         rc, _, err, wall = _run(cmd, args.timeout)
@@ -549,17 +552,18 @@ def main() -> None:
             if len(rows) == 1:
                 print(HEADER, flush=True)
             print(format_row(rows[-1]), flush=True)
-        if "ufl_frames" in args.methods:
+        for method in [m for m in args.methods if m in UFL_FRAMES_METHODS]:
             if area is None:  # no Gmsh run: ask one for the area only
                 probe = run_gmsh(path, "blossom", argparse.Namespace(
                     **{**vars(args), "out": None}), f"{name}_probe", quads=50.0)
                 area = probe.get("area_exact")
             if area is None:
-                rows.append({"method": "ufl_frames", "status": "not available",
+                rows.append({"method": method, "status": "not available",
                              "error": "the shape's area is unknown (Gmsh could not load it)"})
             else:
                 s = args.quad_size or math.sqrt(area / args.quads)
-                rows.append(run_ufl_frames(str(path), s, area, args, f"{name}_ufl_frames"))
+                rows.append(run_ufl_frames(str(path), s, area, args, f"{name}_{method}",
+                                           method))
             if len(rows) == 1:
                 print(HEADER)
             print(format_row(rows[-1]), flush=True)

@@ -86,12 +86,56 @@ def test_annulus_gives_a_structured_polar_grid(scale):
     assert np.bincount(np.rint(k).astype(int)).tolist() == [n_theta] * (n_r + 1)
 
 
-def test_too_coarse_a_grid_is_refused():
-    """At s = 0.4 the annulus is 0.28 quads wide: its two circles round to one line."""
+def test_too_coarse_grids_are_refused_or_repaired():
+    """At s = 0.4 the annulus is 0.28 quads wide: rounding both circles to one line would
+    collapse it, so the repair rounds one the other way (one layer of quads); with two
+    quads around (s = 0.3) the straight quads cannot cover the annulus, which the
+    independent check says. A field with no room at all is refused."""
     x, cells = annulus(8, 48)
     mesh = cut.cut_mesh(x, cells, annulus_field(x))
-    with pytest.raises(quantise.QuantisationError, match="folds .* quad size"):
-        quantise.quantise(mesh, 0.4)
+    grid_map = quantise.quantise(mesh, 0.4)
+    assert grid_map.repaired >= 1
+    radial = np.ptp(grid_map.param.uv, axis=0).min()
+    assert radial == pytest.approx(1.0, abs=1e-6)
+    quads = extract.extract_quads(grid_map)
+    assert check_quad_mesh(quads.points, quads.quads) != []
+    # the repair never produces a fold: it only keeps a trial with fewer folded triangles
+    assert not seamless.folded(grid_map.param).any()
+
+
+def test_a_close_pair_is_repaired_into_two_grid_vertices():
+    """Two opposite singularities a quarter of a quad apart round onto one grid point
+    (the map collapses); the repair rounds one the other way: a valid mesh with a
+    valence-3 and a valence-5 vertex one quad apart (cut_mesh's cancellation off)."""
+    x, cells = grid(20, 20, -1, 1, -1, 1)
+    q = pair_field(x, (-0.11, 0.013), (0.12, 0.007))
+    mesh = cut.cut_mesh(x, cells, q)
+    assert sorted(mesh.turns.tolist()) == [-1, 1]
+    grid_map = quantise.quantise(mesh, 1.0)
+    assert grid_map.repaired >= 1
+    quads = extract.extract_quads(grid_map)
+    assert check_quad_mesh(quads.points, quads.quads, area=4.0) == []
+    valence = quad_quality(quads.points, quads.quads)["interior_valence"]
+    assert valence.get("3") == 1 and valence.get("5") == 1
+
+
+def pair_field(x, plus, minus):
+    """Frames turning by +1/4 around ``plus`` and −1/4 around ``minus`` (unit lengths)."""
+    theta = (np.arctan2(x[:, 1] - plus[1], x[:, 0] - plus[0])
+             - np.arctan2(x[:, 1] - minus[1], x[:, 0] - minus[0])) / 4
+    return odeco.frames_to_q(np.ones((x.shape[0], 2)), theta)
+
+
+def test_close_pairs_cancel():
+    """cut_mesh(cancel_within=d): a ± pair closer than d is cancelled (no singular vertex
+    left, no cut), its quarter turn carried along the path between them."""
+    x, cells = grid(20, 20, -1, 1, -1, 1)
+    q = pair_field(x, (-0.11, 0.013), (0.12, 0.007))
+    kept = cut.cut_mesh(x, cells, q)
+    assert sorted(kept.turns.tolist()) == [-1, 1] and kept.cancelled == 0
+    cancelled = cut.cut_mesh(x, cells, q, cancel_within=0.5)
+    assert cancelled.singular.size == 0 and cancelled.cancelled == 1
+    assert cut.cut_mesh(x, cells, q, cancel_within=0.1).singular.size == 2
 
 
 def test_quantised_functionals_are_integers_and_rounding_is_cheap():

@@ -81,7 +81,7 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     n_theta = found["vertices"] - found["quads"]
     assert n_theta >= 8 and found["quads"] % n_theta == 0
     assert found["interior_valence"] == {"4": found["quads"] - n_theta}
-    with pytest.raises(cli.RunError, match="cannot make quads of this field: .*folds"):
+    with pytest.raises(cli.RunError, match="cannot make quads of this field: .*quad size"):
         cli.run_solve("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True,
                       comm=COMM, quads=True, quad_size=2.0)
     assert not (out / "b").exists()

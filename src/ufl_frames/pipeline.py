@@ -154,7 +154,8 @@ class FrameField:
 
         ``quad_size``: the quads' target mean edge length (default: the triangles' mean
         edge length, about one quad per two triangles). Raises ValueError (every rank)
-        where no valid integer-grid map exists at that size.
+        where no valid integer-grid map exists at that size, or its quads are not a valid
+        mesh (:func:`~ufl_frames.quads.measures.check_quad_mesh`: too few for the shape).
         """
         import time
 
@@ -175,6 +176,9 @@ class FrameField:
             self.quad_mesh = quad_mesh
             area = float(grid_map.param.area.sum())
             problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads)
+            if problems:  # the map is valid, but its grid too coarse for the shape
+                raise ValueError(f"at quad size {size:.3g} the quads are not a valid mesh "
+                                 f"({problems[0]}); take a smaller quad size")
             record = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
             record.update(
                 valid=not problems, problems=problems[:5], quad_size=size,

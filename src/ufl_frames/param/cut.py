@@ -29,7 +29,7 @@ from scipy.sparse import csgraph
 
 from ufl_frames.frames2d import odeco
 
-__all__ = ["CutMesh", "comb", "cut_graph", "cut_mesh", "face_frames", "matchings",
+__all__ = ["CutMesh", "cancel_pairs", "comb", "cut_graph", "cut_mesh", "face_frames", "matchings",
            "singular_vertices", "wedges"]
 
 QUARTER = np.pi / 2
@@ -91,10 +91,14 @@ def matchings(angle: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return k
 
 
-def singular_vertices(cells, angle, edges, faces) -> tuple[np.ndarray, np.ndarray]:
+def singular_vertices(cells, angle, edges, faces, k=None) -> tuple[np.ndarray, np.ndarray]:
     """Interior vertices whose fan of triangles turns the frame by a nonzero multiple of 90°,
     and that turn in quarters (the index is −turn/4 … here: the winding of 4t around the
-    vertex divided by 2π, in quarters: the vertex's index times 4)."""
+    vertex divided by 2π, in quarters: the vertex's index times 4).
+
+    ``k``: the matchings (:func:`matchings`, the default); across edge e the frame turns by
+    angle_g − angle_f + k_e · 90°, so a matching one off the nearest moves a quarter turn
+    from one end of the edge to the other (:func:`cancel_pairs`)."""
     n = int(cells.max()) + 1
     boundary = np.zeros(n, bool)
     on_boundary = faces[:, 1] < 0
@@ -104,7 +108,9 @@ def singular_vertices(cells, angle, edges, faces) -> tuple[np.ndarray, np.ndarra
     # the vertex (counter-clockwise fans: cells are taken counter-clockwise).
     inner = ~on_boundary
     f, g = faces[inner, 0], faces[inner, 1]
-    step = np.mod(angle[g] - angle[f] + QUARTER / 2, QUARTER) - QUARTER / 2  # g relative to f
+    if k is None:
+        k = matchings(angle, faces)
+    step = _wrap(angle[g] - angle[f] + k[inner] * QUARTER)  # g relative to f, labels turned
     winding = np.zeros(n)
     e = edges[inner]
     # Going around vertex a counter-clockwise crosses edge (a, b) from the face on its
@@ -120,6 +126,83 @@ def singular_vertices(cells, angle, edges, faces) -> tuple[np.ndarray, np.ndarra
     turns = np.rint(winding / QUARTER).astype(np.int64)
     singular = np.flatnonzero((turns != 0) & ~boundary)
     return singular, turns[singular]
+
+
+def cancel_pairs(x, cells, edges, faces, k, singular, turns, within: float):
+    """The matchings with every pair of opposite singular vertices closer than ``within``
+    cancelled (closest pairs first, each vertex once), and every other singular vertex
+    closer than ``within``/2 to the boundary moved onto it: along the shortest path of interior
+    edges from one to the other, each edge's matching is turned by one quarter, which
+    moves the quarter turn of the first vertex along the path onto the second, where it
+    cancels. The field itself is not changed: its combing jumps by 90° across the path
+    instead, and the map absorbs that where the pair sat closer than a quad. Returns the
+    new matchings and the number of pairs cancelled."""
+    k = k.copy()
+    positive, negative = singular[turns == 1], singular[turns == -1]
+    distance = np.linalg.norm(x[positive][:, None] - x[negative][None], axis=2)
+    candidates = sorted((distance[i, j], i, j) for i, j in zip(*np.nonzero(distance < within),
+                                                                strict=True))
+    n = x.shape[0]
+    inner = np.flatnonzero(faces[:, 1] >= 0)
+    length = np.linalg.norm(x[edges[inner, 1]] - x[edges[inner, 0]], axis=1)
+    graph = sp.csr_matrix((length, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
+    graph = graph + graph.T
+    edge_id = sp.csr_matrix((inner + 1.0, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
+    edge_id = edge_id + edge_id.T
+    used, cancelled = set(), 0
+    for _, i, j in candidates:
+        a, b = int(positive[i]), int(negative[j])
+        if a in used or b in used:
+            continue
+        _, predecessors = csgraph.dijkstra(graph, directed=False, indices=a,
+                                           return_predecessors=True)
+        if predecessors[b] < 0:
+            continue
+        v = b
+        while v != a:  # the path b <- ... <- a, edge (u, v): move a's quarter from u to v
+            u = int(predecessors[v])
+            e = int(edge_id[u, v]) - 1
+            k[e] = _moved(cells, edges, faces, e, u, k[e])
+            v = u
+        used.update((a, b))
+        cancelled += 1
+    # the rest closer than within/2 to the boundary: their quarter moves onto the nearest
+    # boundary vertex, which becomes a corner of the grid (its two boundary edges get
+    # different constant coordinates), a boundary vertex of valence 3 or 5
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[edges[faces[:, 1] < 0].ravel()] = True
+    boundary = np.flatnonzero(on_boundary)
+    for a in (int(v) for v in singular if int(v) not in used):
+        distance, predecessors = csgraph.dijkstra(graph, directed=False, indices=a,
+                                                  return_predecessors=True)
+        b = int(boundary[np.argmin(distance[boundary])])
+        if not distance[b] < within / 2:
+            continue
+        turn = int(turns[np.flatnonzero(singular == a)[0]])
+        v = b
+        while v != a:
+            u = int(predecessors[v])
+            e = int(edge_id[u, v]) - 1
+            for _ in range(abs(turn)):
+                k[e] = _moved(cells, edges, faces, e, u, k[e], np.sign(turn))
+            v = u
+        used.add(a)
+        cancelled += 1
+    return k, cancelled
+
+
+def _moved(cells, edges, faces, e, u, k_e, turn: int = 1):
+    """k_e turned so that a turn of ``turn`` = ±1 quarter (as :func:`singular_vertices`
+    counts them) moves from vertex u of edge e to its other end."""
+    f = int(faces[e, 0])
+    a, b = int(edges[e, 0]), int(edges[e, 1])
+    pos_a = int(np.flatnonzero(cells[f] == a)[0])
+    b_follows_a = cells[f][(pos_a + 1) % 3] == b
+    sign_a = -1.0 if b_follows_a else 1.0  # winding[a] += sign_a * step, winding[b] −=
+    # step grows by 90° per unit of k: winding at a changes by sign_a, at b by −sign_a.
+    # To take the quarter from u (and give it to the other end): change u's by −turn.
+    sign_u = sign_a if u == a else -sign_a
+    return (k_e - int(turn * sign_u)) % 4
 
 
 def _boundary_loops(edges, faces, n):
@@ -258,6 +341,8 @@ class CutMesh:
     singular: np.ndarray
     turns: np.ndarray
     paths: int
+    cancelled: int = 0
+    vertex_angle: np.ndarray | None = None
 
     @property
     def num_wedges(self) -> int:
@@ -269,8 +354,10 @@ class CutMesh:
         return float(np.linalg.norm(self.x[e[:, 1]] - self.x[e[:, 0]], axis=1).sum())
 
 
-def cut_mesh(x, cells, q) -> CutMesh:
-    """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``."""
+def cut_mesh(x, cells, q, cancel_within: float | None = None) -> CutMesh:
+    """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``;
+    with ``cancel_within``, opposite singular vertices closer than that are cancelled
+    (:func:`cancel_pairs`)."""
     x = np.asarray(x, dtype=np.float64)[:, :2]
     cells = np.asarray(cells, dtype=np.int64)
     e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
@@ -279,7 +366,11 @@ def cut_mesh(x, cells, q) -> CutMesh:
     angle, l1, l2 = face_frames(cells, np.asarray(q, dtype=np.float64))
     edges, faces = interior_edges(cells)
     k = matchings(angle, faces)
-    singular, turns = singular_vertices(cells, angle, edges, faces)
+    singular, turns = singular_vertices(cells, angle, edges, faces, k)
+    cancelled = 0
+    if cancel_within:
+        k, cancelled = cancel_pairs(x, cells, edges, faces, k, singular, turns, cancel_within)
+        singular, turns = singular_vertices(cells, angle, edges, faces, k)
     cut, paths = cut_graph(x, cells, edges, faces, singular)
     r = comb(angle, faces, k, cut)
     angle, l1, l2 = relabel(angle, l1, l2, r)
@@ -287,4 +378,5 @@ def cut_mesh(x, cells, q) -> CutMesh:
     corners = wedges(cells, edges, faces, cut)
     return CutMesh(x=x, cells=cells, angle=angle, l1=l1, l2=l2, edges=edges, faces=faces,
                    cut=cut, jump=jump, corners=corners, singular=singular, turns=turns,
-                   paths=paths)
+                   paths=paths, cancelled=cancelled,
+                   vertex_angle=odeco.q_to_frames(np.asarray(q, dtype=np.float64))[1])

@@ -50,6 +50,8 @@ __all__ = ["IntegerGridMap", "QuantisationError", "integer_functionals", "quanti
 DETERMINED = 1e-9
 #: A functional the fixed ones determine is taken to be off its integer beyond this.
 PARITY_TOLERANCE = 1e-4
+#: Rounds of fold repair (:func:`_repair`), and the quantities tried in each.
+REPAIRS, REPAIR_CANDIDATES = 4, 6
 #: Largest distance to an integer an integer functional may keep after the final solve.
 INTEGER_TOLERANCE = 1e-6
 
@@ -70,7 +72,8 @@ class IntegerGridMap:
     singular vertex), the seamless map it was rounded from, and what the rounding did:
     ``functionals`` (F, (K, 2W)) and their integer ``values``; ``rounded`` how many were
     fixed by the greedy (the others followed); ``max_shift`` the largest rounding distance;
-    ``energy_increase`` the misfit energy the rounding added, relative to the target's."""
+    ``energy_increase`` the misfit energy the rounding added, relative to the target's;
+    ``repaired`` how many were rounded the other way to undo a fold."""
 
     param: Parametrisation
     seamless: Parametrisation
@@ -80,6 +83,7 @@ class IntegerGridMap:
     rounded: int
     max_shift: float
     energy_increase: float
+    repaired: int = 0
 
     @property
     def mesh(self) -> CutMesh:
@@ -279,8 +283,7 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     Fy = (F @ T).tocsr()
     keep = _distinct_rows(Fy)
     Fk = Fy[keep]
-    y = y0
-    rounded, max_shift = 0, 0.0
+    rounded, max_shift, repaired = 0, 0.0, 0
     fixed = np.zeros(0, dtype=np.int64)
     if keep.size:
         G = _covariance(lu, Fk)
@@ -288,16 +291,19 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
         phase = np.array([_PHASE[kind] for kind in kinds[keep]])
         fixed, target = _greedy(mean, G, phase)
         rounded = int(fixed.size)
-        if fixed.size:
-            d = target[fixed]
-            residual = Fk[fixed] @ y0 - d
-            mu = np.linalg.solve(G[np.ix_(fixed, fixed)], residual)
-            y = y0 - lu.solve(Fk[fixed].T @ mu)
-            max_shift = float(np.abs(residual).max())
     if fixed.size:
-        param, _ = unfold(mesh, AT, b, T, y, scale, Fk[fixed], target[fixed])
+        F_fixed, d = Fk[fixed], target[fixed]
+        max_shift = float(np.abs(F_fixed @ y0 - d).max())
+        # ∂y/∂d: the constrained minimiser is y0 − Z (F Z)⁻¹ (F y0 − d), Z = N⁻¹ Fᵀ
+        Z = lu.solve(F_fixed.T.toarray())
+        response = Z @ np.linalg.inv(F_fixed @ Z)
+        y = y0 - response @ (F_fixed @ y0 - d)
+        param, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, d)
+        if folded(param).any():
+            param, repaired = _repair(mesh, (AT, b, T, scale), y0, F, F_fixed, d, response,
+                                      param)
     else:
-        param, _ = unfold(mesh, AT, b, T, y, scale)
+        param, _ = unfold(mesh, AT, b, T, y0, scale)
     values = F @ param.uv.ravel()
     off = np.abs(values - np.rint(values))
     if off.size and off.max() > INTEGER_TOLERANCE:
@@ -315,7 +321,43 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     increase = (_misfit_energy(param) - _misfit_energy(seamless)) / max(float(b @ b), 1e-300)
     return IntegerGridMap(param=param, seamless=seamless, functionals=F, values=values,
                           kinds=kinds, rounded=rounded, max_shift=max_shift,
-                          energy_increase=increase)
+                          energy_increase=increase, repaired=repaired)
+
+
+def _repair(mesh, system, y0, F, F_fixed, d, response, param):
+    """Round again, the other way, the fixed quantities the folded triangles depend on
+    most (a boundary curve and a singular vertex rounded onto one line, say): at most
+    :data:`REPAIRS` times, each keeping the best of :data:`REPAIR_CANDIDATES` trials if it
+    folds fewer triangles and leaves every quantity an integer. Returns the map and the
+    number of quantities rounded again."""
+    AT, b, T, scale = system
+    seamless_values = F_fixed @ y0
+    repaired = 0
+    for _ in range(REPAIRS):
+        bad = folded(param)
+        if not bad.any():
+            break
+        rows = (2 * mesh.corners[bad].reshape(-1, 1) + np.arange(2)).ravel()
+        influence = np.abs(T[rows] @ response).sum(axis=0)
+        best = None
+        for i in np.argsort(-influence)[:REPAIR_CANDIDATES]:
+            trial = d.copy()
+            trial[i] += 1.0 if seamless_values[i] >= d[i] else -1.0
+            y = y0 - response @ (F_fixed @ y0 - trial)
+            candidate, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, trial)
+            values = F @ candidate.uv.ravel()
+            if np.abs(values - np.rint(values)).max(initial=0.0) > INTEGER_TOLERANCE:
+                continue
+            count = int(np.count_nonzero(folded(candidate)))
+            if count < int(np.count_nonzero(bad)) and (best is None or count < best[0]):
+                best = (count, trial, candidate)
+                if count == 0:
+                    break
+        if best is None:
+            break
+        _, d, param = best
+        repaired += 1
+    return param, repaired
 
 
 def _misfit_energy(p: Parametrisation) -> float:

@@ -62,14 +62,21 @@ def quarter_turn(j: int) -> np.ndarray:
 
 def boundary_coordinates(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray]:
     """The boundary edges and, per edge, the coordinate (0: U, 1: V) that is constant
-    along it: that of the branch of its triangle's frame that crosses it (the more normal)."""
+    along it: that of the branch that crosses it (the more normal), with the frame of the
+    edge's two vertices (held aligned with the boundary by the solver) in the labels of
+    its triangle's combed frame — the triangle's own frame, which its third vertex pulls
+    off the boundary's direction (by up to 45° next to a singularity), decides only where
+    the vertex frames are not known."""
     boundary = np.flatnonzero(mesh.faces[:, 1] < 0)
     f = mesh.faces[boundary, 0]
+    angle = mesh.angle[f]
+    if mesh.vertex_angle is not None:
+        quarter = np.pi / 2
+        ends = mesh.vertex_angle[mesh.edges[boundary]] - angle[:, None]  # (nb, 2)
+        angle = angle + np.mean(np.mod(ends + quarter / 2, quarter) - quarter / 2, axis=1)
     direction = mesh.x[mesh.edges[boundary, 1]] - mesh.x[mesh.edges[boundary, 0]]
-    along_u = np.abs(np.cos(mesh.angle[f]) * direction[:, 0]
-                     + np.sin(mesh.angle[f]) * direction[:, 1])
-    along_v = np.abs(-np.sin(mesh.angle[f]) * direction[:, 0]
-                     + np.cos(mesh.angle[f]) * direction[:, 1])
+    along_u = np.abs(np.cos(angle) * direction[:, 0] + np.sin(angle) * direction[:, 1])
+    along_v = np.abs(-np.sin(angle) * direction[:, 0] + np.cos(angle) * direction[:, 1])
     return boundary, np.where(along_u < along_v, 0, 1)
 
 
