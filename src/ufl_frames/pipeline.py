@@ -15,7 +15,7 @@ isotropic frames) lives here once.
 """
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ufl_frames.bootstrap import init_petsc
@@ -148,6 +148,7 @@ class FrameField:
         """The quad mesh of the current field (:mod:`ufl_frames.quads`): the seamless map
         quantised to an integer-grid map (:func:`~ufl_frames.param.quantise.quantise`), its
         integer iso-lines traced into quads (:func:`~ufl_frames.quads.extract.extract_quads`),
+        the worst quads improved (:func:`~ufl_frames.quads.improve.improve_worst_quads`),
         on rank 0. Returns the measures (:func:`~ufl_frames.quads.measures.quad_quality`,
         with ``valid``, ``problems``, ``quad_size``, the rounding's and the seconds per
         stage), the same dict on every rank; ``quad_mesh`` holds the mesh on rank 0.
@@ -163,6 +164,7 @@ class FrameField:
         from ufl_frames.param import measures as param_measures
         from ufl_frames.param import quantise, seamless
         from ufl_frames.quads import extract, measures
+        from ufl_frames.quads.improve import improve_worst_quads
 
         size = mean_cell_edge(self.domain.mesh) if quad_size is None else float(quad_size)
 
@@ -173,6 +175,10 @@ class FrameField:
             quantised = time.perf_counter()
             quad_mesh = extract.extract_quads(grid_map)
             extracted = time.perf_counter()
+            as_extracted = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+            quad_mesh = replace(quad_mesh, points=improve_worst_quads(quad_mesh.points,
+                                                                      quad_mesh.quads))
+            improved = time.perf_counter()
             self.quad_mesh = quad_mesh
             area = float(grid_map.param.area.sum())
             problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads)
@@ -186,7 +192,11 @@ class FrameField:
                 misfit_seamless=param_measures.quality(grid_map.seamless)["misfit"],
                 misfit_quantised=param_measures.quality(grid_map.param)["misfit"],
                 rounded=grid_map.rounded, max_rounding=grid_map.max_shift,
-                seconds={"quantise": quantised - start, "extract": extracted - quantised})
+                repaired=grid_map.repaired, cancelled_singularities=grid_map.mesh.cancelled,
+                extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj",
+                                                              "sj_at_least_0_8")},
+                seconds={"quantise": quantised - start, "extract": extracted - quantised,
+                         "improve": improved - extracted})
             return record
 
         self.quad_quality = self._on_root(work, "cannot make quads of this field")
