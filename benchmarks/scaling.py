@@ -3,15 +3,18 @@
     python benchmarks/scaling.py [--cases piano-noniso piano-iso annulus-noniso annulus-iso]
                                  [--triangles 1e4 1e5 | --sizes 0.05 0.025]
                                  [--np 1] [--np-largest 2] [--timeout 900] [--max-it 500]
-                                 [--json benchmarks/out/scaling.json] [PETSc options]
+                                 [--json benchmarks/out/scaling.json] [--quads]
+                                 [PETSc options]
 
 Every (case, size) runs in a fresh process (under ``mpirun -n NP`` when NP > 1), so that its
 peak memory is its own: the whole run as the CLI does it, through
 :class:`ufl_frames.pipeline.FrameField` — Gmsh meshing and distribution (``mesh``), the MBO
 initial field (``mbo``), the TAO solve with the defaults (``solve``), and the ParaView files
-and figures (``write``). Sizes are given as triangle counts (``--triangles``: the mesh size is
-chosen from the measured counts at h = 0.05, N ~ 1/h²: piano 1887, annulus 2305) or as mesh
-sizes (``--sizes``). ``--np-largest`` runs the largest size on that many ranks instead.
+and figures (``write``), with ``--quads`` the quad mesh at the default quad size (``quads``:
+its quantise, extract and improve seconds in a second table). Sizes are given as triangle
+counts (``--triangles``: the mesh size is chosen from the measured counts at h = 0.05,
+N ~ 1/h²: piano 1887, annulus 2305) or as mesh sizes (``--sizes``). ``--np-largest`` runs
+the largest size on that many ranks instead.
 
 Per run it prints: triangles and vertices, ranks, the wall seconds of each stage (max over
 ranks) and their total, Newton iterations, mean and max Krylov iterations per Newton step,
@@ -53,7 +56,8 @@ REFERENCE_H_005 = 1.1225e-3
 # --- one run (in its own process) -------------------------------------------------------
 
 
-def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str]) -> dict:
+def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
+            quads: bool = False) -> dict:
     """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0)."""
     from ufl_frames.bootstrap import init_petsc
 
@@ -86,6 +90,11 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str]) 
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
     stage("write", lambda: field.write(out, label=shape))
+    quad_record = None
+    if quads:  # the default quad size: the triangles' mean edge
+        found = stage("quads", field.quadrangulate)
+        quad_record = {key: found[key] for key in ("quads", "irregular_vertices", "min_sj",
+                                                   "mean_sj", "valid", "seconds")}
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)
     krylov = result.krylov_iterations or []
     newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
@@ -99,6 +108,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str]) 
         "ksp_max": max(newton) if newton else None, "ksp_per_step": krylov,
         "H_final": result.H_final, "peak_rss_mb": peak_kb / 1024,
         "singularities": sorted(s["index"] for s in field.singularities),
+        "quads": quad_record,
     }
 
 
@@ -113,7 +123,8 @@ def mesh_size_for(case: str, triangles: float) -> float:
 def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
     """Run one (case, h) in a fresh process; the record, or its failure."""
     command = [sys.executable, str(Path(__file__).resolve()), "--one", case, repr(h),
-               "--max-it", str(args.max_it), "--record", str(partial), *petsc_argv]
+               "--max-it", str(args.max_it), "--record", str(partial),
+               *(["--quads"] if args.quads else []), *petsc_argv]
     if ranks > 1:
         mpirun = Path(sys.executable).with_name("mpirun")
         command = [str(mpirun) if mpirun.exists() else "mpirun", "-n", str(ranks), *command]
@@ -132,6 +143,22 @@ def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
     record = json.loads(partial.read_text())
     record["status"] = "ok"
     return record
+
+
+def print_quad_table(records) -> None:
+    """The quad stage per run: its sub-stages' seconds and the mesh it made."""
+    print("\n| case | triangles | quads | quantise s | extract s | improve s | quads s "
+          "| µs per triangle | irregular | min SJ | valid |")
+    print("|" + "---|" * 11)
+    for r in records:
+        q = r.get("quads") if r["status"] == "ok" else None
+        if not q:
+            continue
+        sec = q["seconds"]
+        print(f"| {r['case']} | {r['triangles']} | {q['quads']} | {sec['quantise']:.2f} "
+              f"| {sec['extract']:.2f} | {sec['improve']:.2f} | {r['stages']['quads']:.2f} "
+              f"| {1e6 * r['stages']['quads'] / r['triangles']:.0f} "
+              f"| {q['irregular_vertices']} | {q['min_sj']:.3f} | {q['valid']} |")
 
 
 def _indices(values) -> str:
@@ -248,6 +275,8 @@ def parse_args(argv=None):
     parser.add_argument("--json", type=Path, default=None, help="write all records here")
     parser.add_argument("--one", nargs=2, metavar=("CASE", "H"), help=argparse.SUPPRESS)
     parser.add_argument("--record", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--quads", action="store_true",
+                        help="also make the quad mesh (default quad size) and time its stages")
     return parser.parse_known_args(argv)
 
 
@@ -256,7 +285,7 @@ def main(argv=None) -> int:
     if args.one:
         with tempfile.TemporaryDirectory() as tmp:
             record = run_one(args.one[0], float(args.one[1]), args.max_it, Path(tmp) / "out",
-                             petsc_argv)
+                             petsc_argv, quads=args.quads)
         from mpi4py import MPI
 
         if MPI.COMM_WORLD.rank == 0:
@@ -280,6 +309,8 @@ def main(argv=None) -> int:
                     print(f"  {records[-1]['status']} {records[-1].get('error', '')}",
                           file=sys.stderr)
     print_table(records)
+    if args.quads:
+        print_quad_table(records)
     print()
     for line in growth(records) + targets(records):
         print(f"- {line}")
