@@ -54,19 +54,18 @@ measures another checkout.
 """
 
 import argparse
-import contextlib
 import json
 import math
 import os
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _processes import last_line, run_in_group
 
 ROOT = Path(__file__).resolve().parent.parent
 GALLERY = ROOT / "meshes" / "gallery"
@@ -263,30 +262,7 @@ def _command(np_: int) -> list[str]:
 
 def _run(cmd: list[str], timeout: float, env: dict) -> tuple[int | None, str, str, float]:
     """Run ``cmd`` in its own process group; kill the group on timeout (rc None)."""
-    start = time.perf_counter()
-    proc = subprocess.Popen(
-        cmd,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        cwd=ROOT,
-        start_new_session=True,
-    )
-    try:
-        out, err = proc.communicate(timeout=timeout)
-        rc = proc.returncode
-    except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate()
-        rc = None
-    return rc, out, err, time.perf_counter() - start
-
-
-def _last_line(text: str) -> str:
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    return lines[-1] if lines else ""
+    return run_in_group(cmd, timeout, env=env, cwd=ROOT)
 
 
 def _telling_line(text: str) -> str:
@@ -362,7 +338,7 @@ def solve(shape: dict, isotropic: bool, args, extras: list[str], keep: Path | No
             exit=rc,
             wall_s=seconds,
             command=" ".join(cmd),
-            last_stderr_line=_last_line(err),
+            last_stderr_line=last_line(err),
             stderr_tail=err.splitlines()[-30:] if status != "solved" else [],
         )
         if summary is not None and status == "solved":
@@ -488,7 +464,7 @@ def run_probe(path: Path, args) -> dict:
     if rc is None:
         return {"error": f"Gmsh probe killed after {args.gmsh_timeout:g} s"}
     try:
-        return json.loads(_last_line(out))
+        return json.loads(last_line(out))
     except json.JSONDecodeError:
         status, message = classify(rc if rc != 0 else 1, err, None)
         return {"error": f"Gmsh probe {status}: {message}"}

@@ -49,19 +49,17 @@ valid meshes only); ``--json FILE`` writes everything; a picture of every mesh
 """
 
 import argparse
-import contextlib
 import json
 import math
 import os
 import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _processes import last_line, run_in_group
 
 ROOT = Path(__file__).resolve().parent.parent
 SHAPES = ROOT / "benchmarks" / "shapes"
@@ -271,23 +269,7 @@ def _run(cmd: list[str], timeout: float) -> tuple[int | None, str, str, float]:
     """Run ``cmd`` in its own process group; kill the group on timeout (rc None)."""
     env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"),
            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
-    start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT, env=env, start_new_session=True)
-    try:
-        out, err = proc.communicate(timeout=timeout)
-        rc = proc.returncode
-    except subprocess.TimeoutExpired:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate()
-        rc = None
-    return rc, out, err, time.perf_counter() - start
-
-
-def _last_line(text: str) -> str:
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    return lines[-1] if lines else ""
+    return run_in_group(cmd, timeout, env=env, cwd=ROOT)
 
 
 def run_gmsh(path: Path, method: str, args, stem: str, quads: float | None = None) -> dict:
@@ -308,7 +290,7 @@ def run_gmsh(path: Path, method: str, args, stem: str, quads: float | None = Non
         return json.loads(out.strip().splitlines()[-1])
     except (json.JSONDecodeError, IndexError):
         return {"method": method, "status": "failed",
-                "error": _last_line(err) or f"exit status {rc}"}
+                "error": last_line(err) or f"exit status {rc}"}
 
 
 def _msh_quads(path: Path):
@@ -353,7 +335,7 @@ def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
         if rc is None:
             return {**row, "status": "timeout", "error": f"ran over {args.timeout:g} s"}
         if rc != 0:
-            return {**row, "status": "not available", "error": _last_line(err) or f"exit {rc}"}
+            return {**row, "status": "not available", "error": last_line(err) or f"exit {rc}"}
         try:
             summary = json.loads((folder / "summary.json").read_text())
             reported = summary["quads"]
