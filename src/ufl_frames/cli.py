@@ -164,6 +164,10 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--param", action="store_true",
                        help="also integrate the field into a seamless parametrisation (U, V): "
                        "param.png (integer iso-lines), param.vtu and 'param' in summary.json")
+    solve.add_argument("--conformal", action="store_true",
+                       help="isotropic frames of the MBO directions with the conformal scale "
+                       "(one Poisson solve instead of TAO: the integrable isotropic field, "
+                       "whose lengths follow the singularities' cones)")
     solve.add_argument("--quads", action="store_true",
                        help="also make a quad mesh of the field (integer-grid map, iso-line "
                        "extraction): quads.msh (Gmsh MSH 4.1), quads.vtu, quads.png and "
@@ -348,6 +352,7 @@ def run_solve(
     param: bool = False,
     quad_size: float | None = None,
     quads: bool = False,
+    conformal: bool = False,
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
     :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
@@ -414,20 +419,30 @@ def run_solve(
                                        monitor=mbo_monitor)
         tao_type = PETSc.Options().getString("tao_type", solvers.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
-        interrupts.set_stage(f"the TAO solve ({tao_type})")
-        interrupts.checkpoint(comm)
-        say(f"solving ({kind}, TAO {tao_type}) ...")
-        with _failures(f"the TAO solve ({tao_type})"):
-            result = field.solve(pin_singularities=not free_singularities, max_it=max_it,
-                                 monitor=tao_monitor)
+        if conformal:
+            tao_type = None
+            interrupts.set_stage("the conformal scale")
+            say("conformal scale (isotropic frames of the MBO directions) ...")
+            with _failures("the conformal-scale solve"):
+                field.conformal()
+            result = None
+        else:
+            interrupts.set_stage(f"the TAO solve ({tao_type})")
+            interrupts.checkpoint(comm)
+            say(f"solving ({kind}, TAO {tao_type}) ...")
+            with _failures(f"the TAO solve ({tao_type})"):
+                result = field.solve(pin_singularities=not free_singularities, max_it=max_it,
+                                     monitor=tao_monitor)
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins
     interrupts.set_stage("writing the results")
     interrupts.checkpoint(comm)
-    converged = result.converged_reason.startswith("CONVERGED")
-    say(f"{result.converged_reason} after {result.iterations} iterations "
-        f"({result.wall_time_s:.2f} s): H {result.H_initial:.4e} -> {result.H_final:.4e}")
-    if not converged and not quiet and comm.rank == 0:
-        print(f"{PROG}: warning: TAO stopped with {result.converged_reason}", file=sys.stderr)
+    if result is not None:
+        converged = result.converged_reason.startswith("CONVERGED")
+        say(f"{result.converged_reason} after {result.iterations} iterations "
+            f"({result.wall_time_s:.2f} s): H {result.H_initial:.4e} -> {result.H_final:.4e}")
+        if not converged and not quiet and comm.rank == 0:
+            print(f"{PROG}: warning: TAO stopped with {result.converged_reason}",
+                  file=sys.stderr)
 
     say(f"singularities: {io.describe_singularities(field.singularities)}")
     index_check = field.index_theorem()  # also in the summary
@@ -735,6 +750,7 @@ def main(argv: list[str] | None = None) -> int:
                         param=args.param,
                         quad_size=args.quad_size,
                         quads=args.quads,
+                        conformal=args.conformal,
                     )
                 except Exception as e:
                     watch.stage = "reporting the failure"

@@ -64,6 +64,8 @@ class FrameField:
     #: The last :meth:`parametrise`'s map (on rank 0; None elsewhere) and its measures.
     parametrisation: object | None = field(default=None, repr=False)
     param_quality: dict | None = None
+    #: Whether the lengths are the conformal scale of :meth:`conformal`.
+    conformal_scale: bool = False
     #: The last :meth:`quadrangulate`'s quad mesh (on rank 0; None elsewhere), its measures.
     quad_mesh: object | None = field(default=None, repr=False)
     quad_quality: dict | None = None
@@ -87,6 +89,18 @@ class FrameField:
         return cls(domain=domain, q=q, isotropic=isotropic,
                    max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
                    constraints=constraints, singularities=singularities.locate_singularities(q))
+
+    def conformal(self, options_prefix: str = "conformal_") -> "FrameField":
+        """Make the field the integrable isotropic field of its own directions: lengths
+        e^{−φ} from the conformal-scale Poisson problem ∫ ∇φ·∇w = ∫ R∇t·∇w
+        (:func:`~ufl_frames.fem.conformal.conformal_field`; one linear solve instead of a
+        TAO solve). Returns ``self`` (collective)."""
+        from ufl_frames.fem.conformal import conformal_field
+
+        self.q = conformal_field(self.q, options_prefix=options_prefix)
+        self.isotropic, self.max_aspect, self.conformal_scale = True, None, True
+        self.singularities = singularities.locate_singularities(self.q)
+        return self
 
     def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
               options_prefix: str = "") -> solvers.SolveResult:
@@ -247,6 +261,8 @@ class FrameField:
             "num_vertices": int(domain.num_vertices),
             "num_cells": int(domain.num_cells),
         }
+        if self.conformal_scale:  # no solve: the energy of the field as it is
+            record.update(conformal_scale=True, H_final=energy.integrability_energy(self.q))
         if result is not None:
             record.update({
                 "converged_reason": result.converged_reason,
