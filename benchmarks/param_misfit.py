@@ -4,8 +4,10 @@
                                       [--gd-iterations 2000] [--no-gd]
 
 For each case (``piano`` or ``annulus``, isotropic or not) and mesh size: the MBO field, the
-field of the default solver (TAO ``nls``) and, unless ``--no-gd``, the note's projected
-gradient descent (``bncg``, ``--gd-iterations``), each parametrised by
+field of the default solver (TAO ``nls``), unless ``--no-gd`` the note's projected
+gradient descent (``bncg``, ``--gd-iterations``), and for isotropic cases the conformal
+field of the MBO directions (:meth:`~ufl_frames.pipeline.FrameField.conformal`), each
+parametrised by
 :meth:`ufl_frames.pipeline.FrameField.parametrise` (default quad size). Printed per row:
 triangles, H, the relative L² misfit of the seamless map, flipped triangles, cuts; then
 the misfit's rate per halving of h for each field. An integrable field's misfit is the P1
@@ -33,12 +35,19 @@ def measure(case: str, h: float, gd_iterations: int | None) -> list[dict]:
     comm = MPI.COMM_WORLD
     rows = []
     variants = [("MBO", None, None), ("nls", "nls", 500)]
+    if kind == "iso":
+        variants.append(("conformal", "conformal", None))
     if gd_iterations:
         variants.append(("bncg", "bncg", gd_iterations))
     for name, tao_type, max_it in variants:
         field = FrameField.initial(geometry.build(comm, shape, h), isotropic=kind == "iso")
         H, reason = float("nan"), "-"
-        if tao_type is not None:
+        if tao_type == "conformal":  # one Poisson solve for the lengths, no TAO
+            field.conformal()
+            from ufl_frames.fem import energy
+
+            H, reason = energy.integrability_energy(field.q), "(conformal scale)"
+        elif tao_type is not None:
             from petsc4py import PETSc
 
             PETSc.Options().setValue("pm_tao_type", tao_type)
@@ -73,7 +82,7 @@ def main(argv=None) -> int:
               f"| {r['reason']} | {r['misfit']:.4f} | {r['flipped_triangles']} | {r['cuts']} |")
     print()
     for case in args.cases:
-        for name in ("MBO", "nls", "bncg"):
+        for name in ("MBO", "nls", "bncg", "conformal"):
             seq = [r for r in rows if r["case"] == case and r["field"] == name]
             rates = [math.log2(a["misfit"] / b["misfit"]) * math.log(2) / math.log(a["h"] / b["h"])
                      for a, b in zip(seq[:-1], seq[1:], strict=True)]

@@ -20,6 +20,7 @@ Methods (``--methods``, default all but ``simple`` and ``delaunay``):
   triangles); ``delaunay``: Gmsh's default 2D algorithm (6) recombined by default;
 * ``ufl_frames``: ``ufl-frames solve SHAPE --quads --quad-size S --out DIR --force -q``
   (general frames, the CLI's default), ``ufl_frames_iso`` the same with ``--isotropic``,
+  ``ufl_frames_conf`` with ``--conformal`` (the conformal isotropic field, no TAO),
   in a subprocess (``--mesh-size H`` passed on when given); its ``summary.json`` object
   ``"quads"`` (the keys of :func:`ufl_frames.quads.measures.quad_quality` plus ``valid``
   and ``seconds``) is reported, and ``DIR/quads.msh`` is measured again here. A run that
@@ -77,8 +78,10 @@ GMSH_METHODS = {
     "delaunay": ({"Mesh.RecombineAll": 1}, 1.06),
 }
 #: ufl_frames' two fields: general (non-isotropic, the CLI's default) and isotropic frames.
-UFL_FRAMES_METHODS = {"ufl_frames": [], "ufl_frames_iso": ["--isotropic"]}
-DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames", "ufl_frames_iso")
+UFL_FRAMES_METHODS = {"ufl_frames": [], "ufl_frames_iso": ["--isotropic"],
+                      "ufl_frames_conf": ["--conformal"]}
+DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames", "ufl_frames_iso",
+                   "ufl_frames_conf")
 ALL_METHODS = (*GMSH_METHODS, *UFL_FRAMES_METHODS)
 #: Loader settings for curves (ufl_frames.geometry.CURVE_POINTS_PER_TURN / _PER_CURVE).
 CURVE_OPTIONS = {"Mesh.MinimumCirclePoints": 12, "Mesh.MinimumCurvePoints": 8}
@@ -384,14 +387,14 @@ def _close(a, b) -> bool:
 
 # --- tables -----------------------------------------------------------------------------
 
-HEADER = (f"  {'method':<11}{'quads':>6}{'tris':>5}{'irreg':>6}{'(int+bnd)':>10}"
+HEADER = (f"  {'method':<16}{'quads':>6}{'tris':>5}{'irreg':>6}{'(int+bnd)':>10}"
           f"{'minSJ':>7}{'meanSJ':>7}{'SJ>=.8':>7}{'ratio':>6}{'max':>6}{'area err':>9}"
           f"{'valid':>6}{'time s':>8}{'total s':>8}")
 
 
 def format_row(row: dict) -> str:
     if "quality" not in row:
-        return f"  {row['method']:<11}{row['status']}: {row.get('error', '')}"
+        return f"  {row['method']:<16}{row['status']}: {row.get('error', '')}"
     m = row["quality"]
     ratio = m["edge_length_ratio"]
     split = f"({m['irregular_interior']}+{m['irregular_boundary']})"
@@ -399,7 +402,7 @@ def format_row(row: dict) -> str:
     seconds = row.get("seconds")
     time_s = "".join(f"{v:8.2f}" if isinstance(v, int | float) else f"{'-':>8}"
                      for v in (seconds, row.get("total_s")))
-    text = (f"  {row['method']:<11}{m['quads']:>6}{row.get('triangles', 0):>5}"
+    text = (f"  {row['method']:<16}{m['quads']:>6}{row.get('triangles', 0):>5}"
             f"{m['irregular_vertices']:>6}{split:>10}{m['min_sj']:>7.3f}{m['mean_sj']:>7.3f}"
             f"{m['sj_at_least_0_8']:>7.2f}{ratio['mean']:>6.2f}{ratio['max']:>6.1f}{area}"
             f"{'yes' if row['valid'] else 'NO':>6}{time_s}")
@@ -448,14 +451,14 @@ def summarise(shapes: list[dict], methods: list[str]) -> dict:
 def print_summary(summary: dict, methods: list[str]) -> None:
     width = max(len(label) for label, _, _ in CRITERIA) + 2
     print(f"\nSummary over {summary['shapes']} shapes (valid meshes only; ties count for each)")
-    print(f"  {'':<{width}}" + "".join(f"{m:>12}" for m in methods))
+    print(f"  {'':<{width}}" + "".join(f"{m:>16}" for m in methods))
     for label, _, _ in CRITERIA:
-        print(f"  {label:<{width}}" + "".join(f"{summary['wins'][label][m]:>12}"
+        print(f"  {label:<{width}}" + "".join(f"{summary['wins'][label][m]:>16}"
                                               for m in methods))
     print(f"  {'valid / measured':<{width}}" + "".join(
-        f"{summary['valid'][m]:>8}/{summary['measured'][m]:<3}" for m in methods))
+        f"{summary['valid'][m]:>12}/{summary['measured'][m]:<3}" for m in methods))
     print(f"  {'irregular vertices, total':<{width}}" + "".join(
-        f"{summary['irregular_total'][m]:>12}" for m in methods))
+        f"{summary['irregular_total'][m]:>16}" for m in methods))
 
 
 # --- main -------------------------------------------------------------------------------
