@@ -24,7 +24,8 @@ EXPECTED_PNGS = {
         "convergence_isotropic.png", "convergence_nonisotropic.png", "checks.png",
     ],
     "demo_param.py": ["param_annulus.png", "param_piano_mbo.png", "param_piano_optimised.png"],
-    "demo_quads.py": ["quads_piano_non-isotropic.png", "quads_piano_isotropic.png"],
+    "demo_quads.py": ["quads_piano_non-isotropic.png", "quads_piano_isotropic.png",
+                      "quads_piano_conformal.png"],
     "demo_piano.py": [
         "frames_initial.png", "frames_isotropic.png", "frames_isotropic_free.png",
         "frames_nonisotropic.png", "convergence_isotropic.png",
