@@ -163,8 +163,11 @@ found_iso = report_singularities(problem_iso.q, "isotropic, pinned")
 # has fallen by the factor `-tao_gttol` (default $10^{-6}$). The final field is a
 # stationary point of $H$ on the constrained set, with $H$ far from zero — the note's
 # "large residual energy". (At $h = 0.05$ the project measured $H \approx 0.18$.) It
-# is not a failure to converge but a constrained local minimum: with these two
-# singularities held in place there is no integrable isotropic field nearby.
+# is not a failure to converge but a constrained local minimum of the *discrete* H.
+# An integrable isotropic field with these two singularities does exist — the conformal
+# field of `demos/demo_quads.py` (`FrameField.conformal`), whose lengths go like
+# $r^{\pm 1/4}$ at the two cones — but the P1 bracket of such lengths grows without
+# bound in the triangles at a cone, so the discrete H cannot reach it.
 #
 # ### Isotropic, singularities free
 #
@@ -185,8 +188,9 @@ say(f"H pinned / H free = {result_iso.H_final / result_free.H_final:.3g}")
 # few $\pm 1/4$ triangles side by side, which a finer mesh would resolve or cancel).
 # The total index is the same as before, as the index theorem demands. This is the
 # answer to the note's open question: the isotropic piano's stall is a local
-# minimum *for its singularity structure*; the global minimiser (a conformal map to
-# a rectangle) has none.
+# minimum of the discrete H *for its singularity structure*; the global minimiser of H
+# (a conformal map to a rectangle) has none. With the singularities kept where MBO put
+# them, the integrable isotropic field is the conformal one, a linear solve away.
 #
 # ### Non-isotropic, and why the aspect ratio is bounded
 #
