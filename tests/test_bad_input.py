@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ufl_frames.bootstrap import init_petsc
@@ -22,7 +23,7 @@ init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import cli, interrupts, io, petsc_options  # noqa: E402
+from ufl_frames import checkpoint, cli, interrupts, io, petsc_options  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 MPIRUN = Path(sys.prefix) / "bin" / "mpirun"
@@ -31,6 +32,10 @@ ERROR = "ufl-frames: error: "
 TRIANGLE = ("Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {0, 1, 0};\n"
             "Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 1};\n"
             "Curve Loop(1) = {1, 2, 3}; Plane Surface(1) = {1};\n")
+# A curve loop through itself: Gmsh's 2D meshing of it never ends.
+BOWTIE = ("Point(1) = {0, 0, 0}; Point(2) = {1, 1, 0}; Point(3) = {1, 0, 0};\n"
+          "Point(4) = {0, 1, 0}; Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4};\n"
+          "Line(4) = {4, 1}; Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};\n")
 # Options that make a solve fail inside PETSc, after validation.
 MBO_FAILS = ["-mbo_ksp_type", "cg", "-mbo_pc_type", "none", "-mbo_ksp_max_it", "1",
              "-mbo_ksp_rtol", "1e-30"]
@@ -170,6 +175,7 @@ def test_write_failure_is_one_line_and_leaves_nothing(shared_tmp, capsys, monkey
         raise OSError(28, "No space left on device", str(path))
 
     monkeypatch.setattr(io, "_draw_convergence", full_disk)
+    monkeypatch.setattr(checkpoint, "CHECKPOINT_EVERY", 1)  # checkpoints, removed too
     if COMM.rank == 0:
         (shared_tmp / "keep").mkdir()
     COMM.Barrier()
@@ -193,6 +199,216 @@ def test_stale_staging_folder_does_not_block_a_rerun(shared_tmp):
     assert cli.main(["solve", "annulus", *COARSE, "-q", "--out", shared_tmp / "o"]) == 0
     assert (shared_tmp / "o" / "summary.json").is_file()
     assert (stale / "frames.png").read_text() == "half"  # another run's: not ours to remove
+
+
+# --- geometry files refused or stopped (in-process, collective) --------------------------------
+
+
+def _main_error(args, capsys) -> tuple[int, str | None]:
+    """(status, the one error line on rank 0 or None elsewhere) of ``cli.main(args)``."""
+    status = cli.main(args)
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [line for line in err if line.startswith(ERROR)]
+    assert len(errors) == (1 if COMM.rank == 0 else 0), err
+    assert "Traceback" not in "\n".join(err)
+    return status, errors[0] if errors else None
+
+
+@pytest.mark.parametrize(
+    "script, words",
+    [
+        ('SystemCall "touch made";', ["line 4", "SystemCall", "runs a program"]),
+        ('NonBlockingSystemCall "touch made";', ["NonBlockingSystemCall"]),
+        ('System "touch made";', ["System", "runs a program"]),
+        ('OnelabRun("x", "touch made");', ["OnelabRun"]),
+        ('Save "made.msh";', ["Save", "writes a file"]),
+        ('Print "made.png";', ["Print", "writes a file"]),
+        ('CreateDir "made";', ["CreateDir", "creates a folder"]),
+        ('Printf("a %g", 1 > 0) > "made";', ["Printf", "writes a file"]),
+        ('Printf("a") >> "made";', ["Printf", "writes a file"]),
+        ('Include StrCat("in", "ner.geo");', ["Include", "computed"]),
+        ('Merge "inner.geo";', ["inner.geo", "line 4", "Save"]),
+    ],
+    ids=lambda v: v if isinstance(v, str) and " " not in v else None,
+)
+def test_geo_commands_that_act_outside_are_refused(script, words, shared_tmp, capsys,
+                                                   monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "inner.geo").write_text(TRIANGLE + 'Save "made.msh";\n')
+        (shared_tmp / "shape.geo").write_text(
+            TRIANGLE + f"{script}\n// SystemCall in a comment, Printf(\"x\"); are fine\n")
+    COMM.Barrier()
+    before = tree(shared_tmp)
+    status, line = _main_error(["solve", "shape.geo", *COARSE, "-q"], capsys)
+    assert status == 1
+    if line is not None:
+        for word in words:
+            assert word in line, line
+    assert tree(shared_tmp) == before  # nothing ran, nothing made
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [(BOWTIE, ["surface 1 crosses itself", "curves 1 and 3", "(0.5, 0.5)"]),
+     (TRIANGLE + "Point(5) = {0.4, 0.1, 0}; Point(6) = {0.8, 0.1, 0}; Point(7) = {0.6, 0.1, 0};\n"
+      "Circle(5) = {5, 7, 6}; Circle(6) = {6, 7, 5}; Curve Loop(2) = {5, 6};\n"
+      "Plane Surface(2) = {1, 2};\n", ["surface 2", "cross"])],
+    ids=["bowtie", "hole-across-the-outline"],
+)
+def test_crossing_boundary_is_refused_before_meshing(text, words, shared_tmp, capsys,
+                                                     monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "cross.geo").write_text(text)
+    COMM.Barrier()
+    started = time.monotonic()
+    status, line = _main_error(["solve", "cross.geo", *COARSE, "-q"], capsys)
+    assert status == 1
+    assert time.monotonic() - started < 30  # refused, not stopped by the time limit
+    if line is not None:
+        for word in words:
+            assert word in line, line
+    assert sorted(p.name for p in shared_tmp.iterdir()) == ["cross.geo"]
+
+
+def test_mesh_time_limit_stops_gmsh(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "slow.geo").write_text(TRIANGLE + "Sleep 600;\n")
+    COMM.Barrier()
+    started = time.monotonic()
+    status, line = _main_error(["solve", "slow.geo", *COARSE, "-q", "--mesh-time-limit", "1"],
+                               capsys)
+    assert status == 1
+    assert time.monotonic() - started < 20
+    if line is not None:
+        assert "did not end within the time limit of 1 s" in line, line
+        assert "--mesh-time-limit" in line, line
+    assert sorted(p.name for p in shared_tmp.iterdir()) == ["slow.geo"]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "soon"])
+def test_bad_mesh_time_limit_is_a_usage_error(value, shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    status, line = _main_error(["solve", "annulus", "--mesh-time-limit", value], capsys)
+    assert status == 2
+    if line is not None:
+        assert "--mesh-time-limit" in line, line
+    assert list(shared_tmp.iterdir()) == []
+
+
+# --- checkpoint and resume (in-process, collective) -------------------------------------------
+
+
+RESUMABLE = ["solve", "annulus", "--mesh-size", "0.1", "-q"]
+
+
+def _interrupt_tao_after(monkeypatch, iterates: int) -> None:
+    """A SIGINT seen by the run at its ``iterates``-th TAO iterate (no real signal)."""
+    real, seen = interrupts.pending, []
+
+    def pending(comm):
+        watch = interrupts._WATCH
+        if watch is not None and watch.stage.startswith("the TAO solve"):
+            seen.append(1)
+            if len(seen) >= iterates:
+                return signal.SIGINT
+        return real(comm)
+
+    monkeypatch.setattr(interrupts, "pending", pending)
+
+
+def test_resume_gives_the_uninterrupted_result(shared_tmp, capsys, monkeypatch):
+    full, out = shared_tmp / "full", shared_tmp / "o"
+    assert cli.main([*RESUMABLE, "--out", full]) == 0
+    reference = json.loads((full / "summary.json").read_text())
+    assert reference["iterations"] > 4 and reference["resumed_from_iteration"] is None
+
+    with monkeypatch.context() as patch:
+        _interrupt_tao_after(patch, 4)
+        status, line = _main_error([*RESUMABLE, "--out", out], capsys)
+    assert status == interrupts.INTERRUPTED_STATUS
+    if line is not None:
+        assert f"resume with --resume {out}" in line, line
+    assert sorted(p.name for p in out.iterdir()) == ["checkpoint"]
+    assert [p.name for p in (out / "checkpoint").iterdir()] == ["state.npz"]
+    kept = tree(out)
+
+    # Refused, the checkpoint untouched: another run into the folder, other arguments.
+    cases = [
+        ([*RESUMABLE, "--out", out], 1, ["holds the checkpoint", "--resume"]),
+        (["solve", "piano", "--mesh-size", "0.1", "-q", "--resume", out], 1, ["GEOMETRY"]),
+        ([*RESUMABLE[:-2], "0.2", "-q", "--resume", out], 1, ["--mesh-size", "0.1", "0.2"]),
+        ([*RESUMABLE, "--isotropic", "--resume", out], 1, ["--isotropic"]),
+        ([*RESUMABLE, "--resume", out, "-tao_type", "lmvm"], 1, ["PETSc options"]),
+        ([*RESUMABLE, "--resume", out, "--out", shared_tmp / "other"], 2, ["--out", "--resume"]),
+    ]
+    for args, expected, words in cases:
+        status, line = _main_error(args, capsys)
+        assert status == expected, (args, line)
+        if line is not None:
+            for word in words:
+                assert word in line, (args, line)
+        assert tree(out) == kept
+    assert sorted(p.name for p in shared_tmp.iterdir()) == ["full", "o"]
+
+    assert cli.main([*RESUMABLE, "--resume", out]) == 0
+    resumed = json.loads((out / "summary.json").read_text())
+    assert resumed["resumed_from_iteration"] >= 2
+    assert resumed["iterations"] == reference["iterations"]
+    assert resumed["converged_reason"] == reference["converged_reason"]
+    assert resumed["H_final"] == pytest.approx(reference["H_final"], rel=1e-10)
+    assert [e["it"] for e in resumed["history"]] == list(range(resumed["iterations"] + 1))
+    assert not (out / "checkpoint").exists()
+    assert set(resumed["files"]) == {p.name for p in out.iterdir()}
+    assert_nothing_partial(shared_tmp)
+
+
+def test_resume_bad_input(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "empty").mkdir()
+        (shared_tmp / "junk" / "checkpoint").mkdir(parents=True)
+        (shared_tmp / "junk" / "checkpoint" / "state.npz").write_bytes(b"not a checkpoint")
+        (shared_tmp / "file").write_text("x")
+    COMM.Barrier()
+    before = tree(shared_tmp)
+    for folder, words in [("nowhere", ["'nowhere' does not exist"]),
+                          ("file", ["not a folder"]),
+                          ("empty", ["holds no checkpoint"]),
+                          ("junk", ["unreadable"])]:
+        status, line = _main_error([*RESUMABLE, "--resume", folder], capsys)
+        assert status == 1, folder
+        if line is not None:
+            assert "cannot resume" in line, line
+            for word in words:
+                assert word in line, line
+    assert tree(shared_tmp) == before
+
+
+def test_resume_refuses_a_checkpoint_of_another_mesh(shared_tmp, capsys, monkeypatch):
+    out = shared_tmp / "o"
+    with monkeypatch.context() as patch:
+        _interrupt_tao_after(patch, 3)
+        assert cli.main([*RESUMABLE, "--out", out]) == interrupts.INTERRUPTED_STATUS
+    capsys.readouterr()
+    state = out / "checkpoint" / "state.npz"
+    if COMM.rank == 0:  # the same arguments, another mesh (a new Gmsh, say)
+        with np.load(state) as data:
+            arrays = {k: data[k] for k in data.files}
+        meta = json.loads(str(arrays["meta"]))
+        meta["mesh_key"] = "0" * 64
+        arrays["meta"] = np.array(json.dumps(meta))
+        with open(state, "wb") as f:
+            np.savez(f, **arrays)
+    COMM.Barrier()
+    before = tree(out)
+    status, line = _main_error([*RESUMABLE, "--resume", out], capsys)
+    assert status == 1
+    if line is not None:
+        assert "another mesh" in line, line
+    assert tree(out) == before
 
 
 # --- the output folder ------------------------------------------------------------------------
@@ -270,7 +486,7 @@ def test_output_folder_discard_removes_created_parents(shared_tmp):
 
 def test_output_names():
     for name in ("summary.json", "frames.bp", "frames000000.pvtu", "frames_p12_000000.vtu",
-                 "frames.png", "convergence.png", "frames.pvd"):
+                 "frames.png", "convergence.png", "frames.pvd", "checkpoint"):
         assert io.is_output_name(name), name
     for name in ("notes.txt", "frames.png.bak", "my_frames.png", "frames_px_000000.vtu"):
         assert not io.is_output_name(name), name
@@ -440,9 +656,60 @@ def test_cli_interrupt(wait_for, signum, stage, tmp_path):
     status, err, seconds = _interrupt(args, wait_for, signum, tmp_path,
                                       delay=0.3 if wait_for == "meshing" else 0.0)
     proc = subprocess.CompletedProcess([], status, "", err)
-    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted", signum.name, stage)
+    line = assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted", signum.name,
+                                 stage)
     assert seconds < interrupts.INTERRUPT_GRACE_S + 5
-    assert list(tmp_path.iterdir()) == []
+    if stage == "TAO":  # interrupted solves leave their checkpoint, and say so
+        assert line.endswith("resume with --resume o"), line
+        assert_only_checkpoint(tmp_path / "o")
+        assert [p.name for p in tmp_path.iterdir()] == ["o"]
+    else:
+        assert "nothing written" in line, line
+        assert list(tmp_path.iterdir()) == []
+
+
+def assert_only_checkpoint(out: Path):
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [
+        "checkpoint", "checkpoint/state.npz"]
+
+
+@pytest.fixture(scope="module")
+def piano_reference(tmp_path_factory):
+    """summary.json of an uninterrupted serial run on RESUME_PIANO."""
+    cwd = tmp_path_factory.mktemp("reference")
+    proc = run_cli("solve", *RESUME_PIANO, "--out", "o", "-q", cwd=cwd)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads((cwd / "o" / "summary.json").read_text())
+
+
+RESUME_PIANO = ["piano", "--mesh-size", "0.05"]
+
+
+def _assert_same_result(summary, reference, rel):
+    assert summary["resumed_from_iteration"] >= 2
+    assert summary["iterations"] == reference["iterations"]
+    assert summary["converged_reason"] == reference["converged_reason"]
+    assert summary["H_final"] == pytest.approx(reference["H_final"], rel=rel)
+    found, expected = summary["singularities"], reference["singularities"]
+    assert [s["index"] for s in found] == [s["index"] for s in expected]
+    assert [s[k] for s in found for k in "xy"] == pytest.approx(
+        [s[k] for s in expected for k in "xy"], rel=1e-6)
+
+
+@pytest.mark.serial
+def test_cli_resume_after_sigint(piano_reference, tmp_path):
+    status, err, _ = _interrupt([*RESUME_PIANO, "--out", "o"], "  it    5 ", signal.SIGINT,
+                                tmp_path)
+    proc = subprocess.CompletedProcess([], status, "", err)
+    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "resume with --resume o")
+    assert_only_checkpoint(tmp_path / "o")
+    proc = run_cli("solve", *RESUME_PIANO, "--resume", "o", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "resuming from the checkpoint at iteration" in proc.stdout
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    _assert_same_result(summary, piano_reference, rel=1e-12)  # measured: equal
+    assert not (tmp_path / "o" / "checkpoint").exists()
+    assert_nothing_partial(tmp_path)
 
 
 # --- under mpirun -n 2 ------------------------------------------------------------------------
@@ -466,8 +733,30 @@ def test_mpirun_failures_are_reported_once(args, status, words, tmp_path):
 
 @pytest.mark.serial
 @needs_mpirun
-def test_mpirun_interrupt(tmp_path):
-    status, err, _ = _interrupt(PIANO, "  it    2 ", signal.SIGINT, tmp_path, mpi=True)
+def test_mpirun_interrupt_and_resume(piano_reference, tmp_path):
+    status, err, _ = _interrupt([*RESUME_PIANO, "--out", "o"], "  it    3 ", signal.SIGINT,
+                                tmp_path, mpi=True)
     proc = subprocess.CompletedProcess([], status, "", err)
-    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted")
-    assert list(tmp_path.iterdir()) == []
+    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted",
+                          "resume with --resume o")
+    assert_only_checkpoint(tmp_path / "o")
+    proc = run_cli("solve", *RESUME_PIANO, "--resume", "o", "-q", cwd=tmp_path, mpi=True)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    # Two processes sum in another order than one: round-off (measured 5e-13).
+    _assert_same_result(summary, piano_reference, rel=1e-9)
+    assert summary["num_processes"] == 2
+    assert not (tmp_path / "o" / "checkpoint").exists()
+    assert_nothing_partial(tmp_path)
+
+
+@pytest.mark.serial
+@needs_mpirun
+def test_mpirun_mesh_time_limit(tmp_path):
+    (tmp_path / "bowtie.geo").write_text(BOWTIE + "Mesh 2;\n")  # meshed (forever) as it runs
+    started = time.monotonic()
+    proc = run_cli("solve", "bowtie.geo", *COARSE, "--mesh-time-limit", "2", cwd=tmp_path,
+                   mpi=True, timeout=60)
+    assert time.monotonic() - started < 30
+    assert_one_line_error(proc, 1, "bowtie.geo", "time limit of 2 s", "--mesh-time-limit")
+    assert [p.name for p in tmp_path.iterdir()] == ["bowtie.geo"]

@@ -3,7 +3,8 @@
 ::
 
     ufl-frames solve GEOMETRY [--isotropic] [--mesh-size H] [--max-it N]
-                              [--out DIR] [--force] [-q] [PETSc options ...]
+                              [--mesh-time-limit SECONDS] [--out DIR] [--force]
+                              [--resume DIR] [-q] [PETSc options ...]
     ufl-frames info
     ufl-frames --version
 
@@ -31,20 +32,26 @@ under ``mpirun``) and a status, never a traceback (``UFL_FRAMES_DEBUG=1`` prints
   (``-tao_type`` outside :data:`ufl_frames.petsc_options.TAO_TYPES`, a KSP/PC/line-search
   type PETSc does not have, ``-tao_max_it`` not a positive integer ...), checked before
   anything is meshed;
-* 1, the run cannot be done: unknown geometry, unreadable or 3D mesh, an unusable
-  output folder, and failures on the way (an MBO or TAO solve PETSc fails, a write error);
+* 1, the run cannot be done: unknown geometry, unreadable or 3D mesh, a ``.geo`` that
+  would act outside the run, a boundary that crosses itself, meshing past
+  ``--mesh-time-limit``, an unusable output folder, a ``--resume`` folder without a
+  checkpoint of this run, and failures on the way (an MBO or TAO solve PETSc fails, a
+  write error);
 * 130, interrupted (SIGINT, Ctrl-C, or SIGTERM): at the next MBO level or TAO iteration,
   or within :data:`ufl_frames.interrupts.INTERRUPT_GRACE_S` seconds, whatever runs
   (meshing at once).
 
 Nothing is written unless the run completes: the results go to a hidden folder next to
-DIR, renamed into place at the end (:class:`ufl_frames.io.OutputFolder`). Under
-``mpirun`` an error every rank meets alike is reported once by rank 0 and every rank
+DIR, renamed into place at the end (:class:`ufl_frames.io.OutputFolder`). The one
+exception is the TAO solve's checkpoint, ``DIR/checkpoint/`` (:mod:`ufl_frames.checkpoint`):
+kept by an interrupted run, for ``--resume DIR``; removed when the run completes or fails.
+Under ``mpirun`` an error every rank meets alike is reported once by rank 0 and every rank
 exits; one that a rank meets alone is printed by that rank, which then aborts the job
 (the others would wait for it forever).
 """
 
 import argparse
+import hashlib
 import math
 import os
 import re
@@ -149,6 +156,10 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--max-triangles", type=_positive_float, default=None, metavar="N",
                        help="refuse, before meshing, sizes estimated to give more triangles "
                        "(default 4e6)")
+    solve.add_argument("--mesh-time-limit", type=_seconds, default=None, metavar="SECONDS",
+                       help="stop reading and meshing a geometry file after this many "
+                       "seconds (default 300, more in proportion with --max-triangles above "
+                       "4e6; 'inf' for none)")
     solve.add_argument("--max-it", type=_positive_int, default=DEFAULT_MAX_IT, metavar="N",
                        help=f"TAO iterations at most (default {DEFAULT_MAX_IT}; "
                        "-tao_max_it wins)")
@@ -157,6 +168,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "or be empty unless --force")
     solve.add_argument("--force", action="store_true",
                        help="write into an existing non-empty output folder, replacing files")
+    solve.add_argument("--resume", metavar="DIR", default=None,
+                       help="go on from the checkpoint an interrupted run left in its output "
+                       "folder DIR (give the same GEOMETRY and options); the results go to DIR")
     solve.add_argument("--max-aspect", type=_aspect, default=DEFAULT_MAX_ASPECT, metavar="A",
                        help=f"bound on l_max/l_min of non-isotropic frames (default "
                        f"{DEFAULT_MAX_ASPECT:g}; 'inf' for none: the energy then has degenerate "
@@ -194,6 +208,17 @@ def _aspect(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number >= 1 or 'inf', got {text!r}") from None
     if not value >= 1:  # also rejects NaN
         raise argparse.ArgumentTypeError(f"must be >= 1 (or 'inf'), got {text!r}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds or 'inf', "
+                                         f"got {text!r}") from None
+    if not value > 0:  # also rejects NaN
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
     return value
 
 
@@ -282,8 +307,9 @@ def _nearest_existing(path: Path) -> Path:
     return path
 
 
-def _output_folder_problem(out: Path, force: bool) -> str | None:
-    """Why ``out`` cannot be the output folder, or None (checked on one rank)."""
+def _output_folder_problem(out: Path, force: bool, resuming: bool = False) -> str | None:
+    """Why ``out`` cannot be the output folder, or None (checked on one rank); when
+    ``resuming``, its ``checkpoint`` folder is the run's own."""
     if out.is_symlink() and not out.exists():
         return f"output path {str(out)!r} is a broken symbolic link"
     target = Path(os.path.abspath(out)) if not out.is_symlink() else out.resolve()
@@ -292,7 +318,11 @@ def _output_folder_problem(out: Path, force: bool) -> str | None:
     if out.exists():
         if not out.is_dir():
             return f"output path {str(out)!r} exists and is not a folder"
-        if not force and any(out.iterdir()):
+        entries = {p.name for p in out.iterdir()}
+        if not force and entries == {"checkpoint"} and not resuming:
+            return (f"output folder {str(out)!r} holds the checkpoint of an interrupted run: "
+                    f"resume it with --resume {out}, or start again with --force")
+        if not force and entries - ({"checkpoint"} if resuming else set()):
             return f"output folder {str(out)!r} exists and is not empty (use --force to overwrite)"
         if not os.access(out, os.W_OK | os.X_OK):
             return f"output folder {str(out)!r} is not writable"
@@ -308,13 +338,13 @@ def _output_folder_problem(out: Path, force: bool) -> str | None:
     return None
 
 
-def check_output_folder(out, force: bool, comm) -> None:
+def check_output_folder(out, force: bool, comm, resuming: bool = False) -> None:
     """Raise :class:`OutputFolderError` on every rank if ``out`` cannot be used (collective).
 
     Checked on rank 0 and broadcast, so that all ranks agree even when another rank
     has already started writing.
     """
-    problem = _output_folder_problem(Path(out), force) if comm.rank == 0 else None
+    problem = _output_folder_problem(Path(out), force, resuming) if comm.rank == 0 else None
     problem = comm.bcast(problem, root=0)
     if problem is not None:
         raise OutputFolderError(problem)
@@ -349,10 +379,12 @@ def run_solve(
     free_singularities: bool = False,
     size_factor: float = 1.0,
     max_triangles: float | None = None,
+    mesh_time_limit: float | None = None,
     param: bool = False,
     quad_size: float | None = None,
     quads: bool = False,
     conformal: bool = False,
+    resume=None,
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
     :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
@@ -373,27 +405,44 @@ def run_solve(
     from mpi4py import MPI
     from petsc4py import PETSc
 
+    from ufl_frames import checkpoint as checkpoints
     from ufl_frames import geometry as geometry_module
-    from ufl_frames import io, solvers
-    from ufl_frames.pipeline import FrameField
 
     comm = MPI.COMM_WORLD if comm is None else comm
     say = _printer(comm, quiet)
     start = time.perf_counter()
     user_options = PETSc.Options().getAll()
     geometry = str(geometry)
+    if resume is not None:
+        if out is not None and os.path.abspath(out) != os.path.abspath(resume):
+            raise InputError("out and resume name different folders")
+        out = resume
     out = default_output_folder(geometry) if out is None else Path(out)
     _check_parameters(mesh_size, max_it)
     problem = petsc_option_problem(user_options)
     if problem is not None:
         raise InputError(problem)
-    check_output_folder(out, force, comm)
+    run = _run_record(geometry, comm, isotropic=isotropic, mesh_size=mesh_size,
+                      size_factor=size_factor, max_triangles=max_triangles,
+                      max_aspect=max_aspect, free_singularities=free_singularities,
+                      max_it=max_it, conformal=conformal, petsc_options=user_options)
+    saved = None
+    if resume is not None:
+        try:
+            saved = checkpoints.read(out, comm)
+            checkpoints.check_run(saved, run, out)
+        except checkpoints.CheckpointError as e:
+            raise InputError(str(e)) from e
+    check_output_folder(out, force, comm, resuming=resume is not None)
     size = "relative to the shape" if mesh_size is None else f"mesh size {mesh_size:g}"
     say(f"meshing {geometry} ({size}) ...")
     limit = {} if max_triangles is None else {"max_triangles": max_triangles}
+    limit["time_limit"] = mesh_time_limit
     interrupts.set_stage("meshing")
     try:
         domain = geometry_module.build(comm, geometry, mesh_size, size_factor, **limit)
+    except geometry_module.MeshTimeLimit as e:  # raised identically on every rank
+        raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
     except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
     interrupts.set_stage("the MBO initial field")
@@ -402,15 +451,85 @@ def run_solve(
         say(f"  note: {note}")
     say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
         f"{domain.mesh_size:.3g}), {comm.size} process{'es' if comm.size > 1 else ''}")
+    key = checkpoints.mesh_key(domain.mesh)
+    if saved is not None and saved["mesh_key"] != key:
+        raise InputError(f"cannot resume: the checkpoint in {str(out)!r} is of another mesh "
+                         "(the geometry or its meshing changed); start again with --force")
+    store = checkpoints.CheckpointFolder(out, comm, run, key, existing=saved is not None)
+    interrupts.note_checkpoint(out if saved is not None else None)
+    try:
+        return _solve_and_write(domain, store, saved, say, start, out, geometry, comm,
+                                isotropic=isotropic, max_it=max_it, force=force, quiet=quiet,
+                                max_aspect=max_aspect, free_singularities=free_singularities,
+                                size_factor=size_factor, param=param, quad_size=quad_size,
+                                quads=quads, conformal=conformal, user_options=user_options)
+    except KeyboardInterrupt:  # Interrupted too: the checkpoint, if any, is for --resume
+        raise
+    except BaseException:
+        store.discard()  # a failed run leaves nothing (a checkpoint resumed from stays)
+        raise
+    finally:
+        interrupts.note_checkpoint(None)
+
+
+#: PETSc options that change what a run prints, not what it computes: not compared
+#: when resuming.
+_OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info$")
+
+
+def _run_record(geometry: str, comm, **arguments) -> dict:
+    """The arguments that decide a run's result, for its checkpoint (collective): the
+    geometry by name or by the SHA-256 of its file, the PETSc options but for monitors."""
+    from ufl_frames import geometry as geometry_module
+
+    identity = None
+    if geometry in geometry_module.KNOWN_GEOMETRIES:
+        identity = geometry
+    elif comm.rank == 0:
+        try:
+            identity = "sha256:" + hashlib.sha256(Path(geometry).read_bytes()).hexdigest()
+        except OSError:
+            identity = None  # meshing reports it
+    identity = comm.bcast(identity, root=0)
+    options = arguments.pop("petsc_options")
+    record = {"geometry": geometry, "geometry_id": identity, **arguments}
+    record["petsc_options"] = sorted([name, value] for name, value in options.items()
+                                     if not _OUTPUT_ONLY_OPTION.search(name))
+    for name in ("mesh_size", "size_factor", "max_triangles", "max_aspect"):
+        if record[name] is not None:
+            record[name] = float(record[name])
+    return record
+
+
+def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, isotropic,
+                     max_it, force, quiet, max_aspect, free_singularities, size_factor,
+                     param, quad_size, quads, conformal, user_options) -> dict:
+    """MBO → TAO (from ``saved``, a checkpoint, if given; checkpoints into ``store``) →
+    singularities → files in ``out``: the rest of :func:`run_solve`."""
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    from ufl_frames import checkpoint as checkpoints
+    from ufl_frames import io, solvers
+    from ufl_frames.pipeline import FrameField
 
     def mbo_monitor(level, tau, change):
         say(f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}")
         interrupts.checkpoint(comm)
 
-    def tao_monitor(e):
+    def tao_monitor(e):  # interrupts are taken by keep(), called just before
         say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
             + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else ""))
-        interrupts.checkpoint(comm)
+
+    def keep(state):
+        """Save ``state`` every CHECKPOINT_EVERY steps and when interrupted, then stop
+        if interrupted (at each TAO iterate, before the monitor prints)."""
+        signum = interrupts.pending(comm)
+        if state.iterations > 0 and (signum or
+                                     state.iterations % checkpoints.CHECKPOINT_EVERY == 0):
+            store.save(state, field.q.function_space)
+            interrupts.note_checkpoint(out)
+        interrupts.checkpoint(comm, signum)
 
     with options_scope():  # the solvers' defaults end with the run
         say("MBO initial field ...")
@@ -419,6 +538,7 @@ def run_solve(
                                        monitor=mbo_monitor)
         tao_type = PETSc.Options().getString("tao_type", solvers.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
+        state = None  # the checkpoint resumed from
         if conformal:
             tao_type = None
             interrupts.set_stage("the conformal scale")
@@ -429,10 +549,16 @@ def run_solve(
         else:
             interrupts.set_stage(f"the TAO solve ({tao_type})")
             interrupts.checkpoint(comm)
+            if saved is not None:
+                try:
+                    state = checkpoints.restore(saved, field.q.function_space, comm)
+                except checkpoints.CheckpointError as e:
+                    raise InputError(str(e)) from e
+                say(f"resuming from the checkpoint at iteration {state.iterations} ...")
             say(f"solving ({kind}, TAO {tao_type}) ...")
             with _failures(f"the TAO solve ({tao_type})"):
                 result = field.solve(pin_singularities=not free_singularities, max_it=max_it,
-                                     monitor=tao_monitor)
+                                     monitor=tao_monitor, checkpoint=keep, resume=state)
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins
     interrupts.set_stage("writing the results")
     interrupts.checkpoint(comm)
@@ -474,7 +600,8 @@ def run_solve(
             + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
         interrupts.checkpoint(comm)
 
-    folder = io.OutputFolder(out, force=force, comm=comm)
+    ours = (checkpoints.FOLDER,) if store.written else ()
+    folder = io.OutputFolder(out, force=force, comm=comm, ours=ours)
     try:
         with _failures(f"writing the results to {str(out)!r}", writing=True):
             staging = folder.open()
@@ -498,6 +625,7 @@ def run_solve(
                 "num_processes": comm.size,
                 "tao_type": tao_type,
                 "petsc_options": user_options,
+                "resumed_from_iteration": None if state is None else state.iterations,
                 **record,
                 "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
                 "files": files,
@@ -704,6 +832,10 @@ def main(argv: list[str] | None = None) -> int:
         options = split_petsc_options(extras)
         if args.command is None:
             raise UsageError("missing command: use 'solve' or 'info' (see ufl-frames --help)")
+        if args.command == "solve" and args.resume is not None and args.out is not None \
+                and os.path.abspath(args.out) != os.path.abspath(args.resume):
+            raise UsageError("--out and --resume name different folders: the resumed run "
+                             "writes to its --resume folder")
     except UsageError as e:
         return _fail(str(e), 2)
 
@@ -747,6 +879,8 @@ def main(argv: list[str] | None = None) -> int:
                         free_singularities=args.free_singularities,
                         size_factor=args.size_factor,
                         max_triangles=args.max_triangles,
+                        mesh_time_limit=args.mesh_time_limit,
+                        resume=args.resume,
                         param=args.param,
                         quad_size=args.quad_size,
                         quads=args.quads,

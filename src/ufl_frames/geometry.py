@@ -44,7 +44,12 @@ conforming P1 triangle mesh of the whole planar domain:
 - mesh size (:func:`load`): the default is relative to the shape (the file's own
   sizes where it sets any, else about :data:`AUTO_TRIANGLES` triangles), curves are
   resolved with at least :data:`CURVE_POINTS_PER_TURN` points per full turn, and an
-  estimate above ``max_triangles`` is refused before meshing.
+  estimate above ``max_triangles`` is refused before meshing;
+- a ``.geo`` that would act outside the run (``Exit``, ``SystemCall``, ``Save``, ...:
+  :func:`_check_geo_script`) is refused before Gmsh runs it, and a surface whose
+  boundary curves cross (:func:`_check_crossings`) before it is meshed;
+- reading and meshing run in a child process, stopped after a time limit
+  (:func:`mesh_time_limit`, :class:`MeshTimeLimit`).
 
 The geometry must lie in a plane z = const; volumes and tetrahedra are rejected.
 Gmsh runs on rank 0 only; errors are raised on every rank as :class:`GeometryError`
@@ -58,8 +63,13 @@ import contextlib
 import math
 import numbers
 import os
+import pickle
 import re
+import select
+import signal
 import sys
+import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,9 +88,11 @@ __all__ = [
     "Domain",
     "GeometryError",
     "KNOWN_GEOMETRIES",
+    "MeshTimeLimit",
     "annulus",
     "build",
     "load",
+    "mesh_time_limit",
     "piano",
 ]
 
@@ -107,6 +119,15 @@ MAX_TRIANGLES = 4_000_000
 REFINE_ABOVE = 150_000
 #: Facet tag of boundary edges that lie on no curve of the file (a bare ``.msh``).
 NO_CURVE = 0
+#: Seconds :func:`load` lets Gmsh read and mesh a file with the default ``max_triangles``
+#: (more in proportion for a larger one, :func:`mesh_time_limit`); then it is stopped.
+#: Loading the piano at 3.8e6 triangles (about the largest default) took 62 s on a 2-core
+#: machine, DOLFINx's distribution included: the default leaves a factor 5.
+MESH_TIME_LIMIT = 300.0
+#: Points per curved boundary curve for the crossing check of :func:`_check_crossings`
+#: (and, to confirm a crossing found, :data:`CROSSING_CONFIRM` times as many).
+CROSSING_SAMPLES = 64
+CROSSING_CONFIRM = 16
 
 # Piano outline (see module docstring).
 PIANO_WIDTH = 2.0
@@ -121,6 +142,16 @@ _UNSET_SIZE = 1e21  # Gmsh's "no size" is 1e22 (MAX_LC)
 
 class GeometryError(ValueError):
     """A geometry could not be built, read or meshed (one-line message)."""
+
+
+class MeshTimeLimit(GeometryError):
+    """Reading and meshing a geometry file took longer than its time limit."""
+
+
+def mesh_time_limit(max_triangles: float = MAX_TRIANGLES) -> float:
+    """The default time limit of :func:`load`: :data:`MESH_TIME_LIMIT` seconds, scaled up
+    in proportion above the default ``max_triangles``."""
+    return MESH_TIME_LIMIT * max(1.0, float(max_triangles) / MAX_TRIANGLES)
 
 
 @dataclass(frozen=True)
@@ -298,6 +329,7 @@ def load(
     mesh_size: float | None = None,
     size_factor: float = 1.0,
     max_triangles: int = MAX_TRIANGLES,
+    time_limit: float | None = None,
 ) -> Domain:
     """Domain from a ``.geo``, ``.msh``, ``.step``/``.stp`` or ``.brep`` file.
 
@@ -310,11 +342,19 @@ def load(
     more than ``max_triangles`` (estimated from the area) are refused before
     meshing. A ``.msh`` is taken as it is: sizes do not apply.
     Physical groups in the file are ignored: the domain is all its surfaces.
+
+    Reading and meshing run in a child process stopped after ``time_limit`` seconds
+    (default :func:`mesh_time_limit`; ``math.inf``: in this process, no limit), with
+    :class:`MeshTimeLimit`. Boundaries whose curves cross (a curve loop through itself,
+    a hole across the outline), on which Gmsh's meshing never ends, are refused before.
     """
     path = Path(path)
     h = None if mesh_size is None else _check_mesh_size(mesh_size)
     factor = _check_positive("size_factor", size_factor)
     limit = _check_positive("max_triangles", max_triangles)
+    seconds = mesh_time_limit(limit) if time_limit is None else time_limit
+    if not (_is_real(seconds) and seconds > 0):  # inf allowed: no limit
+        raise GeometryError(f"time_limit must be a positive number of seconds, got {seconds!r}")
     ext = path.suffix.lower()
     known = GEO_EXTENSIONS + MESH_EXTENSIONS + CAD_EXTENSIONS
     if ext not in known:
@@ -343,9 +383,10 @@ def load(
             )
         if not _surfaces():
             raise GeometryError(f"{source!r} defines no 2D surface")
+        _check_crossings(source)
         return _mesh_model(_Sizing(h, factor, limit), notes)
 
-    return _create(comm, make, source, cad=ext not in MESH_EXTENSIONS)
+    return _create(comm, make, source, cad=ext not in MESH_EXTENSIONS, time_limit=seconds)
 
 
 #: Built-in geometry names accepted by :func:`build`.
@@ -358,11 +399,13 @@ def build(
     mesh_size: float | None = None,
     size_factor: float = 1.0,
     max_triangles: int = MAX_TRIANGLES,
+    time_limit: float | None = None,
 ) -> Domain:
     """A built-in geometry by name (:data:`KNOWN_GEOMETRIES`) or a file for :func:`load`.
 
     Built-in shapes take ``mesh_size`` (default :data:`BUILTIN_MESH_SIZE`) times
-    ``size_factor``.
+    ``size_factor`` (meshed in this process: ``max_triangles`` and ``time_limit`` are
+    for files).
     """
     key = str(name_or_path)
     if key in KNOWN_GEOMETRIES:
@@ -374,7 +417,7 @@ def build(
     # Decided on rank 0, which reads the file: every rank must take the same branch.
     is_file = (looks_like_file or path.exists()) if comm.rank == 0 else None
     if comm.bcast(is_file, root=0):
-        return load(comm, path, mesh_size, size_factor, max_triangles)
+        return load(comm, path, mesh_size, size_factor, max_triangles, time_limit)
     raise GeometryError(
         f"unknown geometry {key!r}: not a file; known names are "
         f"{', '.join(sorted(KNOWN_GEOMETRIES))}"
@@ -419,14 +462,40 @@ def _check_msh_header(path: Path) -> None:
 
 #: Comments and strings of a Gmsh script (``//`` to the end of the line, ``/* */``, "...").
 _GEO_NOISE = re.compile(r'//[^\n]*|/\*.*?(?:\*/|\Z)|"(?:[^"\\]|\\.)*"?', re.DOTALL)
-_GEO_INCLUDE = re.compile(r'\bInclude\s*"((?:[^"\\]|\\.)*)"')
-#: Script commands that end the process from inside Gmsh (``exit()``): no error to catch.
-_GEO_EXIT = re.compile(r"\bExit\b")
+#: Scripts a script runs: ``Include "file"``, and ``Merge "file.geo"``.
+_GEO_INCLUDE = re.compile(r'\b(Include|Merge)\s*"((?:[^"\\]|\\.)*)"')
+_GEO_COMPUTED_INCLUDE = re.compile(r'(?<![.\w])Include\s*(?!["\s])')
+#: Script commands refused (Gmsh 4.15 runs each of them): what each would do.
+_GEO_REFUSED = {
+    "Exit": "would end the program inside Gmsh",
+    "SystemCall": "runs a program",
+    "NonBlockingSystemCall": "runs a program",
+    "System": "runs a program",
+    "OnelabRun": "runs a program",
+    "Save": "writes a file",
+    "Print": "writes a file",
+    "CreateDir": "creates a folder",
+}
+_GEO_COMMAND = re.compile(r"(?<![.\w])(" + "|".join(_GEO_REFUSED) + r")\b")
+_GEO_PRINTF = re.compile(r"(?<![.\w])Printf\s*\(")
+
+
+def _printf_redirect(code: str, start: int) -> bool:
+    """Whether the ``Printf(`` call whose ``(`` ends at ``start`` is followed by ``>``
+    (``> "file"``, ``>> "file"``: written to a file)."""
+    depth, i = 1, start
+    while i < len(code) and depth:
+        depth += {"(": 1, ")": -1}.get(code[i], 0)
+        i += 1
+    return code[i:].lstrip().startswith(">")
 
 
 def _check_geo_script(path: Path, seen: set | None = None) -> None:
-    """Refuse a ``.geo`` (or a file it ``Include``s) that calls ``Exit``: Gmsh would end
-    the whole process there, with status 0 and nothing done."""
+    """Refuse a ``.geo`` (or a script it ``Include``s or ``Merge``s) that would act
+    outside the run: ``Exit`` (Gmsh would end the whole process, with status 0 and
+    nothing done), programs (``SystemCall``, ``System``, ``OnelabRun``...) and files or
+    folders written (``Save``, ``Print``, ``Printf(...) > "file"``, ``CreateDir``); also
+    an ``Include`` of a computed name, which cannot be checked."""
     seen = set() if seen is None else seen
     key = path.resolve()
     if key in seen or len(seen) > 100:
@@ -436,22 +505,26 @@ def _check_geo_script(path: Path, seen: set | None = None) -> None:
         text = path.read_bytes().decode("utf-8", errors="replace")
     except OSError as e:
         raise GeometryError(f"cannot read {str(path)!r}: {_one_line(e)}") from None
+
     def blank(m):  # keeps the line numbers
         kept = "\n" * m.group(0).count("\n")
         return f'""{kept}' if m.group(0).startswith('"') else f" {kept}"
 
     code = _GEO_NOISE.sub(blank, text)
-    match = _GEO_EXIT.search(code)
-    if match is not None:
-        line = code.count("\n", 0, match.start()) + 1
-        raise GeometryError(
-            f"{str(path)!r} line {line} calls Exit, which would end the program inside "
-            "Gmsh: remove it"
-        )
+    found = [(m.start(), m.group(1), _GEO_REFUSED[m.group(1)])
+             for m in _GEO_COMMAND.finditer(code)]
+    found += [(m.start(), 'Printf(...) > "file"', "writes a file")
+              for m in _GEO_PRINTF.finditer(code) if _printf_redirect(code, m.end())]
+    found += [(m.start(), "Include with a computed file name", "cannot be checked")
+              for m in _GEO_COMPUTED_INCLUDE.finditer(code)]
+    if found:
+        start, name, what = min(found)
+        line = code.count("\n", 0, start) + 1
+        raise GeometryError(f"{str(path)!r} line {line} calls {name}, which {what}: remove it")
     no_comments = re.sub(r'//[^\n]*|/\*.*?(?:\*/|\Z)', " ", text, flags=re.DOTALL)
-    for name in _GEO_INCLUDE.findall(no_comments):
+    for command, name in _GEO_INCLUDE.findall(no_comments):
         child = path.parent / name
-        if child.is_file():
+        if (command == "Include" or child.suffix.lower() in GEO_EXTENSIONS) and child.is_file():
             _check_geo_script(child, seen)
 
 
@@ -616,13 +689,100 @@ def _model_area() -> float:
         x, cells = _triangles_of_model()[:2]
         area = float(np.abs(_signed_areas(x, cells)).sum())
     except Exception:
-        x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(-1, -1)
-        area = (x1 - x0) * (y1 - y0)  # an upper bound is enough for a size estimate
+        area = 0.0
     finally:
         gmsh.model.mesh.clear()
         for k, v in saved.items():
             gmsh.option.setNumber(k, v)
+    if not area > 0:  # the trial failed: an upper bound is enough for a size estimate
+        x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(-1, -1)
+        area = (x1 - x0) * (y1 - y0)
     return area
+
+
+def _curve_points(curve: int, samples: int) -> np.ndarray:
+    """(n, 2) points along a curve, equally spaced in its parameter (2 for a line)."""
+    n = 2 if gmsh.model.getType(1, curve) == "Line" else samples
+    lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, curve))
+    xyz = np.asarray(gmsh.model.getValue(1, curve, np.linspace(lo, hi, n)))
+    return xyz.reshape(-1, 3)[:, :2]
+
+
+def _crossing_pairs(polylines: dict, tol: float) -> list[tuple[int, int, np.ndarray]]:
+    """(curve, curve, point) of the polylines' segments that cross properly (each end of
+    either strictly on its own side of the other, by more than ``tol``); one per pair."""
+    curve_of = np.concatenate([np.full(len(p) - 1, c) for c, p in polylines.items()])
+    a = np.concatenate([p[:-1] for p in polylines.values()])
+    b = np.concatenate([p[1:] for p in polylines.values()])
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.argsort(lo[:, 0], kind="stable")
+    xs = lo[order, 0]
+    # Sweep in x: segment i against the later ones whose x-range starts within its own.
+    ends = np.searchsorted(xs, hi[order, 0], side="right")
+    found = {}
+    start = 0
+    while start < order.size:
+        counts = np.maximum(ends[start:] - np.arange(start, order.size) - 1, 0)
+        stop = start + max(1, int(np.searchsorted(np.cumsum(counts), 2_000_000)))
+        stop = min(stop, order.size)
+        first = np.repeat(np.arange(start, stop), counts[: stop - start])
+        offsets = np.arange(first.size) - np.repeat(np.cumsum(counts[: stop - start])
+                                                    - counts[: stop - start],
+                                                    counts[: stop - start])
+        i, j = order[first], order[first + 1 + offsets]
+        start = stop
+        keep = (lo[i, 1] <= hi[j, 1]) & (lo[j, 1] <= hi[i, 1])
+        i, j = i[keep], j[keep]
+
+        def side(p, q, r):
+            return ((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1])
+                    - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+        s1, s2 = side(a[i], b[i], a[j]), side(a[i], b[i], b[j])
+        s3, s4 = side(a[j], b[j], a[i]), side(a[j], b[j], b[i])
+        cross = ((np.minimum(s1, s2) < -tol) & (np.maximum(s1, s2) > tol)
+                 & (np.minimum(s3, s4) < -tol) & (np.maximum(s3, s4) > tol))
+        for k in np.flatnonzero(cross):
+            pair = tuple(sorted((int(curve_of[i[k]]), int(curve_of[j[k]]))))
+            t = s3[k] / (s3[k] - s4[k])  # where along segment i
+            found.setdefault(pair, a[i[k]] + t * (b[i[k]] - a[i[k]]))
+    return [(*pair, point) for pair, point in found.items()]
+
+
+def _check_crossings(source: str) -> None:
+    """Refuse a surface whose boundary curves cross: a curve loop through itself, or two
+    of its loops across each other. Gmsh's 2D meshing never ends on those (it splits the
+    crossing edges and tries again, forever). Checked on points along the curves
+    (:data:`CROSSING_SAMPLES` per curved one), each crossing confirmed on
+    :data:`CROSSING_CONFIRM` times as many (a chord of a curve may cross a curve close
+    to it that the curve itself does not); curves that only touch are let through."""
+    x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(-1, -1)
+    tol = 1e-9 * max((x1 - x0) ** 2 + (y1 - y0) ** 2, 1e-300)
+    cache: dict[tuple[int, int], np.ndarray] = {}
+
+    def points(curve, samples):
+        if (curve, samples) not in cache:
+            cache[curve, samples] = _curve_points(curve, samples)
+        return cache[curve, samples]
+
+    for _, surface in gmsh.model.getEntities(2):
+        boundary = gmsh.model.getBoundary([(2, surface)], combined=False, oriented=False)
+        curves = sorted({abs(int(tag)) for dim, tag in boundary if dim == 1})
+        if not curves:
+            continue
+        coarse = {c: points(c, CROSSING_SAMPLES) for c in curves}
+        for first, second, _ in _crossing_pairs(coarse, tol):
+            fine = {c: points(c, CROSSING_SAMPLES * CROSSING_CONFIRM) for c in {first, second}}
+            confirmed = [p for p in _crossing_pairs(fine, tol) if p[:2] == (first, second)]
+            if confirmed:
+                x, y = confirmed[0][2]
+                which = (f"curve {first} crosses itself" if first == second
+                         else f"curves {first} and {second} cross")
+                raise GeometryError(
+                    f"{source!r}: the boundary of surface {surface} crosses itself ({which} "
+                    f"near ({x:.4g}, {y:.4g})): Gmsh cannot mesh it; make each curve loop a "
+                    "simple closed curve, with holes inside the outline"
+                )
 
 
 def _mesh_model(sizing: _Sizing, notes: list[str]) -> float | None:
@@ -636,6 +796,8 @@ def _mesh_model(sizing: _Sizing, notes: list[str]) -> float | None:
         gmsh.option.setNumber(name, max(gmsh.option.getNumber(name), least))
     own_sizes = sizing.h is None and _file_sets_sizes()
     area = _model_area()
+    if not (area > 0 and math.isfinite(area)):
+        raise GeometryError(f"the surfaces have no area to mesh (area {area:.3g})")
     refinements = 0
     if own_sizes:
         h = None
@@ -939,51 +1101,152 @@ _TOUCHED_OPTIONS = (
 )
 
 
-def _create(comm: MPI.Comm, make, source: str, cad: bool) -> Domain:
+def _create(comm: MPI.Comm, make, source: str, cad: bool,
+            time_limit: float = math.inf) -> Domain:
     """Run ``make(notes)`` on rank 0 in a fresh Gmsh model (it meshes, returning the size
-    asked for), turn the mesh into checked arrays, distribute it over ``comm``."""
+    asked for), turn the mesh into checked arrays, distribute it over ``comm``.
+
+    With a finite ``time_limit`` (seconds) that runs in a child process, stopped
+    (:class:`MeshTimeLimit`) when it takes longer (see :func:`_in_child`)."""
     root = 0
-    owns, previous_model, saved = False, None, {}
     error, arrays, info = None, None, None
     if comm.rank == root:
-        owns = not gmsh.isInitialized()
         try:
-            if owns:
-                gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
+            if math.isfinite(time_limit) and hasattr(os, "fork"):
+                arrays, info = _in_child(lambda: _gmsh_session(make, source, cad), source,
+                                         time_limit)
             else:
-                saved = {k: gmsh.option.getNumber(k) for k in _TOUCHED_OPTIONS}
-                previous_model = gmsh.model.getCurrent()
-            gmsh.option.setNumber("General.Terminal", 1 if _verbose() else 0)
-            gmsh.model.add(f"ufl_frames_{id(make):x}")
-            notes: list[str] = []
-            requested = make(notes)
-            arrays = _mesh_arrays(source, notes)
-            mesh_angle = _interior_angles(arrays.x, arrays.cells, arrays.x.shape[0])
-            if cad:
-                psi, corners = _cad_directions(arrays, mesh_angle)
-                nodes = np.flatnonzero(np.isfinite(psi)).astype(np.int64)
-                directions = (nodes, psi[nodes])
-            else:
-                corners, directions = _mesh_corners(arrays, mesh_angle), None
-            info = {
-                "requested": requested,
-                "corners": tuple(corners),
-                "chi": _euler_characteristic(arrays),
-                "h": _mean_edge_length(arrays),
-                "notes": tuple(notes),
-                "directions": directions,
-            }
+                arrays, info = _gmsh_session(make, source, cad)
         except GeometryError as e:
-            error = str(e)
-        except Exception as e:
-            error = f"Gmsh failed: {_one_line(e)}"
-        finally:
-            _release(owns, previous_model, saved)
+            error = (isinstance(e, MeshTimeLimit), str(e))
     error = comm.bcast(error, root=root)
     if error is not None:
-        raise GeometryError(error)
+        raise (MeshTimeLimit if error[0] else GeometryError)(error[1])
     info = comm.bcast(info, root=root)
     return _distribute(comm, arrays, info, source)
+
+
+def _gmsh_session(make, source: str, cad: bool):
+    """(arrays, info) of ``make``'s mesh, in a fresh Gmsh model (this process, rank 0);
+    every failure as :class:`GeometryError`."""
+    owns, previous_model, saved = not gmsh.isInitialized(), None, {}
+    try:
+        if owns:
+            gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
+        else:
+            saved = {k: gmsh.option.getNumber(k) for k in _TOUCHED_OPTIONS}
+            previous_model = gmsh.model.getCurrent()
+        gmsh.option.setNumber("General.Terminal", 1 if _verbose() else 0)
+        gmsh.model.add(f"ufl_frames_{id(make):x}")
+        notes: list[str] = []
+        requested = make(notes)
+        arrays = _mesh_arrays(source, notes)
+        mesh_angle = _interior_angles(arrays.x, arrays.cells, arrays.x.shape[0])
+        if cad:
+            psi, corners = _cad_directions(arrays, mesh_angle)
+            nodes = np.flatnonzero(np.isfinite(psi)).astype(np.int64)
+            directions = (nodes, psi[nodes])
+        else:
+            corners, directions = _mesh_corners(arrays, mesh_angle), None
+        info = {
+            "requested": requested,
+            "corners": tuple(corners),
+            "chi": _euler_characteristic(arrays),
+            "h": _mean_edge_length(arrays),
+            "notes": tuple(notes),
+            "directions": directions,
+        }
+        return arrays, info
+    except GeometryError:
+        raise
+    except Exception as e:
+        raise GeometryError(f"Gmsh failed: {_one_line(e)}") from e
+    finally:
+        _release(owns, previous_model, saved)
+
+
+def _in_child(work, source: str, limit: float):
+    """``work()`` in a forked child process; its result, or :class:`GeometryError`.
+
+    Gmsh has no way to stop a meshing step from outside (an invalid curve loop makes it
+    retry its edge recovery forever), so the step runs in a copy of this process that is
+    killed after ``limit`` seconds (:class:`MeshTimeLimit`); a crash of Gmsh there is an
+    error here too, not the end of the run. The child inherits the blocked signals of
+    :class:`ufl_frames.interrupts.SignalWatch`, gets SIGKILL if this process ends first
+    (Linux), and returns its result pickled through a pipe."""
+    parent = os.getpid()
+    read_end, write_end = os.pipe()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with warnings.catch_warnings():  # "multi-threaded, fork() may deadlock": the child
+        warnings.simplefilter("ignore", DeprecationWarning)  # runs Gmsh and NumPy alone
+        pid = os.fork()
+    if pid == 0:  # the child: never returns
+        status = 1
+        try:
+            os.close(read_end)
+            _die_with(parent)
+            try:
+                result = ("ok", work())
+            except GeometryError as e:
+                result = ("error", str(e))
+            except BaseException as e:
+                result = ("error", f"Gmsh failed: {_one_line(e)}")
+            with os.fdopen(write_end, "wb") as pipe:
+                pickle.dump(result, pipe, protocol=pickle.HIGHEST_PROTOCOL)
+            status = 0
+        finally:
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+                sys.stderr.flush()
+            os._exit(status)
+    os.close(write_end)
+    deadline = time.monotonic() + limit
+    chunks, finished = [], False
+    waiting = select.poll()  # not select.select: no limit on the descriptor's number
+    waiting.register(read_end, select.POLLIN)
+    try:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0 or not waiting.poll(min(left, 1e6) * 1000):
+                break
+            chunk = os.read(read_end, 1 << 20)
+            if not chunk:
+                finished = True
+                break
+            chunks.append(chunk)
+    finally:
+        os.close(read_end)
+        if not finished:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        status = os.waitpid(pid, 0)[1]
+    if not finished:
+        raise MeshTimeLimit(
+            f"meshing {source!r} did not end within the time limit of {limit:g} s (an "
+            "invalid geometry Gmsh cannot mesh, or a mesh too fine for the limit): stopped"
+        )
+    try:
+        kind, value = pickle.loads(b"".join(chunks))
+    except Exception:
+        why = (f"killed by {signal.Signals(os.WTERMSIG(status)).name}"
+               if os.WIFSIGNALED(status) else f"exit status {os.waitstatus_to_exitcode(status)}")
+        raise GeometryError(f"Gmsh crashed on {source!r} ({why})") from None
+    if kind == "error":
+        raise GeometryError(value)
+    return value
+
+
+def _die_with(parent: int) -> None:
+    """SIGKILL for this (child) process when ``parent`` ends (Linux ``prctl``; else none)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent ended before the prctl
+        os._exit(1)
 
 
 def _distribute(comm: MPI.Comm, arrays: _Arrays | None, info: dict, source: str) -> Domain:

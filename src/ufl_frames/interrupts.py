@@ -4,7 +4,8 @@
 main thread is in C (Gmsh, a KSP solve); the run asks at its checkpoints
 (:func:`checkpoint`: every MBO level and TAO iteration, between stages) and stops there
 with :class:`Interrupted`, or, past :data:`INTERRUPT_GRACE_S`, the helper thread ends the
-process with :data:`INTERRUPTED_STATUS` after removing the staging folder.
+process with :data:`INTERRUPTED_STATUS` after removing the staging folder. A run that
+has written a checkpoint (:func:`note_checkpoint`) says how to resume it.
 """
 
 import os
@@ -14,7 +15,7 @@ import threading
 import time
 
 __all__ = ["INTERRUPTED_STATUS", "INTERRUPT_GRACE_S", "Interrupted", "SignalWatch",
-           "checkpoint", "set_stage"]
+           "checkpoint", "note_checkpoint", "pending", "set_stage"]
 
 #: Exit status of an interrupted run (SIGINT or SIGTERM).
 INTERRUPTED_STATUS = 130
@@ -25,14 +26,18 @@ INTERRUPT_GRACE_S = 3.0
 class Interrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM, acted on at a point where the run can stop cleanly."""
 
-    def __init__(self, signum: int, stage: str = ""):
+    def __init__(self, signum: int, stage: str = "", resume: str | None = None):
         self.signum = signum
         self.stage = stage
+        #: The output folder holding the run's checkpoint (None: nothing written).
+        self.resume = resume
         super().__init__(signum)
 
     def __str__(self) -> str:
         where = f" during {self.stage}" if self.stage else ""
-        return f"interrupted by {signal.Signals(self.signum).name}{where}; nothing written"
+        what = ("nothing written" if self.resume is None else
+                f"resume with --resume {self.resume}")
+        return f"interrupted by {signal.Signals(self.signum).name}{where}; {what}"
 
 
 class SignalWatch:
@@ -65,6 +70,7 @@ class SignalWatch:
         self.received: int | None = None
         self.handled = threading.Event()
         self.output = None  # the io.OutputFolder being written, removed on a hard exit
+        self.resume = None  # the output folder once a checkpoint is in it (note_checkpoint)
         self._stop = threading.Event()
         self._thread = None
         self._saved_mask = None
@@ -131,7 +137,7 @@ class SignalWatch:
         if self.output is not None:
             self.output.discard()
         if self.comm is None or self.comm.rank == 0:
-            self.report(str(Interrupted(signum, self.stage)))
+            self.report(str(Interrupted(signum, self.stage, self.resume)))
         else:
             time.sleep(0.5)  # rank 0, signalled too, prints first
         os._exit(INTERRUPTED_STATUS)
@@ -158,15 +164,31 @@ def set_stage(stage: str) -> None:
         _WATCH.reinstall()
 
 
-def checkpoint(comm) -> None:
-    """Raise :class:`Interrupted` on every rank if any rank was signalled (collective)."""
+def note_checkpoint(folder) -> None:
+    """The run's checkpoint is now in the output folder ``folder`` (None: no longer): an
+    interrupt from now on says to resume it."""
+    if _WATCH is not None:
+        _WATCH.resume = None if folder is None else str(folder)
+
+
+def pending(comm) -> int:
+    """The signal any rank has received (0: none), the same on every rank (collective)."""
     if _WATCH is None:
-        return
+        return 0
     signum = _WATCH.received or 0
     if comm.size > 1:
         from mpi4py import MPI
 
         signum = comm.allreduce(signum, op=MPI.MAX)
+    return signum
+
+
+def checkpoint(comm, signum: int | None = None) -> None:
+    """Raise :class:`Interrupted` on every rank if any rank was signalled (collective;
+    ``signum``: what :func:`pending` said just before, not asked again)."""
+    signum = pending(comm) if signum is None else signum
     if signum:
-        _WATCH.handled.set()
-        raise Interrupted(signum, _WATCH.stage)
+        if _WATCH is not None:
+            _WATCH.handled.set()
+        raise Interrupted(signum, _WATCH.stage if _WATCH is not None else "",
+                          _WATCH.resume if _WATCH is not None else None)

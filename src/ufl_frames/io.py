@@ -815,6 +815,7 @@ OUTPUT_NAMES = (
     r"frames\.xdmf", r"frames\.h5", r"frames\.png", r"convergence\.png",
     r"param\.png", r"param\.vtu",  # FrameField.write_param
     r"quads\.msh", r"quads\.vtu", r"quads\.png",  # FrameField.write_quads
+    r"checkpoint",  # ufl_frames.checkpoint: an unfinished run's, removed when it completes
 )
 _OUTPUT_NAME = re.compile("|".join(f"(?:{name})" for name in OUTPUT_NAMES))
 #: Seconds :meth:`OutputFolder.commit` waits for another run replacing files in the same
@@ -858,13 +859,17 @@ class OutputFolder:
     * ``path`` has files without ``force``: :class:`OutputFolderBusy` (checked again
       at the end: another run may have written it meanwhile).
 
-    A symbolic link to a folder as ``path`` stands for its target.
+    A symbolic link to a folder as ``path`` stands for its target. ``ours``: names in
+    ``path`` that this run wrote there itself (its ``checkpoint`` folder): they do not
+    make the folder non-empty, and go when the results are put in place.
     """
 
-    def __init__(self, path, force: bool = False, comm: MPI.Comm = MPI.COMM_WORLD):
+    def __init__(self, path, force: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
+                 ours: tuple[str, ...] = ()):
         self.path = Path(path)
         self.force = force
         self.comm = comm
+        self.ours = tuple(ours)
         self.staging: Path | None = None
         self._created: list[Path] = []  # parent folders made by open(), innermost last
 
@@ -939,10 +944,25 @@ class OutputFolder:
                                    "meanwhile and is not a folder; results discarded")
         with _locked(target, self.path):
             entries = os.listdir(target)
-            if not entries:  # moved in, not renamed over it: it may be someone's cwd
-                for name in sorted(os.listdir(staging), key=lambda n: n == "summary.json"):
-                    os.rename(staging / name, target / name)
-                staging.rmdir()
+            if all(name in self.ours for name in entries):
+                # Moved in, not renamed over it: it may be someone's cwd.
+                old = target.parent / f"{staging.name[:-len('.partial')]}.old"
+                old.mkdir()
+                moved = []
+                try:
+                    for name in entries:
+                        os.rename(target / name, old / name)
+                        moved.append(name)
+                    for name in sorted(os.listdir(staging), key=lambda n: n == "summary.json"):
+                        os.rename(staging / name, target / name)
+                    staging.rmdir()
+                except BaseException:
+                    for name in moved:  # this run's checkpoint stays, as it was
+                        with contextlib.suppress(OSError):
+                            os.rename(old / name, target / name)
+                    raise
+                finally:
+                    shutil.rmtree(old, ignore_errors=True)
                 return
             if not self.force:
                 raise OutputFolderBusy(

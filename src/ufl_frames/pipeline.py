@@ -103,16 +103,22 @@ class FrameField:
         return self
 
     def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
-              options_prefix: str = "") -> solvers.SolveResult:
+              options_prefix: str = "", checkpoint=None,
+              resume: solvers.SolverState | None = None) -> solvers.SolveResult:
         """Minimise H from the current field with TAO (:func:`ufl_frames.solvers.solve`);
-        ``q`` holds the result, ``singularities`` are found again (collective)."""
+        ``q`` holds the result, ``singularities`` are found again (collective).
+
+        ``checkpoint`` and ``resume`` as for :func:`~ufl_frames.solvers.solve`: a solve
+        resumed on the field :meth:`initial` made (its constraints and pinned vertices
+        are those of the original start) ends as the original would have."""
         self.problem = solvers.frame_problem(
             self.q, isotropic=self.isotropic, pin_singularities=pin_singularities,
             max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
             constraints=self.constraints,  # the MBO field's: boundary, normals, masses once
         )
         self.result = solvers.solve(self.problem, max_it=max_it, monitor=monitor,
-                                   options_prefix=options_prefix)
+                                   options_prefix=options_prefix, checkpoint=checkpoint,
+                                   resume=resume)
         self.singularities = singularities.locate_singularities(self.q)
         self.pinned_singularities = pin_singularities
         return self.result

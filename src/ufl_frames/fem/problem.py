@@ -67,6 +67,8 @@ class FrameProblem:
     #: During a solve: the (vector, PETSc state) that q is R of, and the tracking flag.
     _synced: tuple | None = field(default=None, repr=False)
     _tracking: bool = field(default=False, repr=False)
+    #: During a solve: the iterate last written with ``keep`` ((vector, state), rows).
+    _kept: tuple | None = field(default=None, repr=False)
 
     @property
     def constraints(self) -> FrameConstraints:
@@ -118,21 +120,33 @@ class FrameProblem:
         same PETSc state, that q was last set from or written to (TAO changes x only
         through PETSc, which counts every change), and :meth:`evaluation` reuses its
         assembly while q is unchanged. Only for code that changes q through
-        :meth:`set_from_x` and :meth:`retract` alone, such as the TAO callbacks."""
+        :meth:`set_from_x` and :meth:`retract` alone, such as the TAO callbacks.
+
+        An iterate written with :meth:`write_x` (``keep``) is recognised until the vector
+        changes, whatever was evaluated in between: q is then put back as it was, not
+        retracted again (R(R(q)) is R(q) only up to round-off)."""
         self._tracking, self._synced, self._evaluated, self.held = True, None, None, None
+        self._kept = None
         try:
             yield self
         finally:
             self._tracking, self._synced, self._evaluated, self.held = False, None, None, None
+            self._kept = None
 
     def _mark_synced(self, x: PETSc.Vec) -> None:
         if self._tracking:
-            self._synced = (x.handle, x.stateGet())
+            self._synced = (x.getId(), x.stateGet())
 
     def set_from_x(self, x: PETSc.Vec) -> None:
         """q ← R(x / √m): unscale, fill ghosts, retract (steps 4–5)."""
-        if self._tracking and self._synced == (x.handle, x.stateGet()):
+        if self._tracking and self._synced == (x.getId(), x.stateGet()):
             return  # q is R(x) already
+        if self._tracking and self._kept is not None and self._kept[0] == (x.getId(),
+                                                                          x.stateGet()):
+            self.rows[:] = self._kept[1]  # the iterate x was written from
+            self._version += 1
+            self._mark_synced(x)
+            return
         n = self.owned
         self.rows[:n] = self.manifold.from_x(
             x.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS))
@@ -146,10 +160,13 @@ class FrameProblem:
         self._version += 1
         self._synced = None
 
-    def write_x(self, x: PETSc.Vec) -> None:
-        """x ← √m q (owned rows)."""
+    def write_x(self, x: PETSc.Vec, keep: bool = False) -> None:
+        """x ← √m q (owned rows); with ``keep`` (while tracking), x is the solver's iterate:
+        :meth:`set_from_x` of it gives this q back, until x changes."""
         x.getArray()[:] = self.manifold.to_x(self.rows).ravel()
         self._mark_synced(x)
+        if keep and self._tracking:
+            self._kept = ((x.getId(), x.stateGet()), self.rows.copy())
 
     # --- energies and gradients ------------------------------------------------------
 

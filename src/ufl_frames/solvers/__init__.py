@@ -14,6 +14,7 @@ from ufl_frames.solvers.tao import (
     SUPPORTED_TYPES,
     TYPE_OPTIONS,
     SolveResult,
+    SolverState,
     converged_reason_name,
     solve,
 )
@@ -28,6 +29,7 @@ __all__ = [
     "FrameProblem",
     "GaussNewtonModel",
     "SolveResult",
+    "SolverState",
     "converged_reason_name",
     "frame_problem",
     "solve",

@@ -126,6 +126,7 @@ class GaussNewtonModel:
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.release, self.active = release, None
         self.adapt, self.adaptation = adapt, 1.0  # the factor a of λ (see ADAPT_FACTOR)
+        self._resumed_step = None  # the step length the first update adapts to (resume)
         self.exact, self.sphere = exact, 0.0
         for name in self._OWNED:
             setattr(self, name, None)
@@ -230,11 +231,21 @@ class GaussNewtonModel:
         self.shift_value = 0.0
         return result
 
+    def resume(self, adaptation: float, gnorm0: float | None, active, step: float) -> None:
+        """Go on from an earlier solve's state (:class:`ufl_frames.solvers.SolverState`):
+        its damping factor and reference gradient, the active set of its last assembly,
+        and the length of its last step (which a new TAO does not report)."""
+        self.adaptation, self.gnorm0 = adaptation, gnorm0
+        self.active = None if active is None else np.asarray(active, dtype=bool).copy()
+        self._resumed_step = step
+
     def update(self, tao, x, H, P):
         """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
         self.problem.set_from_x(x)
         if self.adapt and self.gnorm0 is not None:  # after the first Newton step
             step = tao.getSolutionStatus()[4]  # the last line search's step length
+            if self._resumed_step is not None:
+                step, self._resumed_step = self._resumed_step, None
             if step >= 1.0 - 1e-12:
                 self.adaptation = max(ADAPT_FLOOR, self.adaptation / ADAPT_FACTOR)
             else:

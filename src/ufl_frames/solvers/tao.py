@@ -44,13 +44,14 @@ gave no value, and ``setFromOptions`` comes last.
 
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
 import dolfinx.fem.petsc  # noqa: E402, F401
+import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
@@ -159,6 +160,36 @@ class SolveResult:
         return [entry["ksp_its"] for entry in self.history[1:]]
 
 
+@dataclass
+class SolverState:
+    """A solve at an accepted iterate: what :func:`solve` needs (``resume``) to go on from
+    there as the solve that made it would have. Arrays are this rank's local rows.
+
+    ``rows``: the iterate q (owned rows, (n, 5)); ``history`` as in :class:`SolveResult`
+    so far; ``tao_iterations``: TAO's own count there; ``tao_gnorm0``: the gradient norm
+    TAO's relative test (``-tao_gttol``) divides by; with a Newton model, its damping
+    state (``adaptation``, ``model_gnorm0``), the last step length (``step``), the
+    aspect bound's active set of the last Newton step (``active``) and the rows it held
+    there (``held``; None: none), owned and ghost rows.
+    """
+
+    rows: np.ndarray = field(repr=False)
+    history: list[dict]
+    tao_iterations: int
+    tao_gnorm0: float
+    wall_time_s: float
+    step: float = 0.0
+    adaptation: float | None = None
+    model_gnorm0: float | None = None
+    active: np.ndarray | None = field(default=None, repr=False)
+    held: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def iterations(self) -> int:
+        """Accepted steps so far (as :attr:`SolveResult.iterations`)."""
+        return len(self.history) - 1
+
+
 #: TAO types that run on this problem (checked by the CLI before anything is meshed).
 SUPPORTED_TYPES = TAO_TYPES
 
@@ -172,11 +203,21 @@ def solve(
     options_prefix: str = "",
     defaults: dict | None = None,
     monitor=None,
+    checkpoint=None,
+    resume: SolverState | None = None,
 ) -> SolveResult:
     """Minimise H over 𝓜 from ``problem.q`` with TAO; ``problem.q`` holds the result.
 
     ``max_it`` is a default for ``-tao_max_it`` (the command line wins). ``monitor``
     receives each history entry ``{"it", "H", "E", "gnorm", "step"}`` (on every rank).
+    ``checkpoint`` receives, before ``monitor``, the :class:`SolverState` at each
+    accepted iterate (collective: on every rank). ``resume`` goes on from such a state,
+    made for the same ``problem`` (the same mesh, initial field and options): the
+    history continues it, ``max_it`` counts from the original start, the relative
+    gradient test keeps the original |g₀|, and the Newton model its damping and active
+    set, so that the result is that of the solve that made the state (for ``nls`` and
+    ``bncg`` bit for bit as measured, mostly); what TAO keeps inside starts afresh: the
+    trust radius of ``nls``'s truncated CG, ``lmvm``'s L-BFGS memory.
 
     Two defaults are relative to the scales of ``problem`` (given values are absolute):
 
@@ -201,7 +242,7 @@ def solve(
     options.setdefault("tao_gatol", gttol * problem.gradient_scale)
     options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
-        return _solve(problem, tao_type, options_prefix, monitor)
+        return _solve(problem, tao_type, options_prefix, monitor, checkpoint, resume)
 
 
 def tao_callbacks(problem: FrameProblem):
@@ -223,7 +264,7 @@ def tao_callbacks(problem: FrameProblem):
 
     def update(tao, it):
         problem.set_from_x(tao.getSolution())
-        problem.write_x(tao.getSolution())
+        problem.write_x(tao.getSolution(), keep=True)
 
     return objective, objective_gradient, update
 
@@ -248,7 +289,8 @@ def _released(exc: BaseException) -> BaseException:
     return exc
 
 
-def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
+def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
+           resume=None) -> SolveResult:
     """TAO from ``problem.q``, with the options already in the database (see :func:`solve`).
 
     Every PETSc object made here (x, g, the model, the TAO) is destroyed on the way out,
@@ -284,17 +326,30 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
 
     objective, objective_gradient, update = tao_callbacks(problem)
 
-    history = []
+    history = [] if resume is None else [dict(entry) for entry in resume.history]
     linear_iterations = [0, 0]  # Krylov iterations so far, and at the last history entry
+    skip_first = resume is not None  # TAO's first report is the resumed iterate again
+    earlier = 0.0 if resume is None else resume.wall_time_s
 
     def count_linear(ksp, it, rnorm):
         if it > 0:
             linear_iterations[0] += 1
 
     def record(tao):
+        nonlocal skip_first
         _, f, gnorm, _, step, _ = tao.getSolutionStatus()
+        if resume is None and tao.getIterationNumber() == 0:
+            gnorm0[0] = float(gnorm)  # TAO's |g₀|: its last report numbered 0 (see SolveResult)
+        if skip_first:
+            skip_first = False
+            return
         if history and (f, gnorm) == (history[-1]["H"], history[-1]["gnorm"]):
             return  # a rejected trust-region step (ntr monitors those too): x did not move
+        if resume is not None and len(history) == len(resume.history) \
+                and tao.getIterationNumber() == 0:
+            # This TAO numbers its first step 0 again (bncg does, see SolveResult): it
+            # would allow one step more than the iterations left.
+            tao.setMaximumIterations(max(tao.getMaximumIterations() - 1, 0))
         problem.set_from_x(tao.getSolution())
         entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
                  "gnorm": float(gnorm), "step": float(step)}
@@ -302,15 +357,40 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
             entry["ksp_its"] = linear_iterations[0] - linear_iterations[1]
             linear_iterations[1] = linear_iterations[0]
         history.append(entry)
+        if checkpoint is not None:
+            checkpoint(snapshot(tao, float(step)))
         if monitor is not None:
             monitor(entry)
+
+    def snapshot(tao, step) -> SolverState:
+        wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+        state = SolverState(
+            rows=problem.rows[: problem.owned].copy(), history=[dict(e) for e in history],
+            tao_iterations=tao_base + tao.getIterationNumber(), tao_gnorm0=tao_gnorm0(),
+            wall_time_s=earlier + wall, step=step)
+        if model is not None:
+            state.adaptation, state.model_gnorm0 = model.adaptation, model.gnorm0
+            state.active = None if model.active is None else model.active.copy()
+            state.held = None if problem.held is None else problem.held.copy()
+        return state
+
+    tao_base = 0 if resume is None else resume.tao_iterations
+    gnorm0 = [None]  # what TAO's relative gradient test divides by
+
+    def tao_gnorm0() -> float:
+        return resume.tao_gnorm0 if resume is not None else gnorm0[0]
 
     with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
         owned.enter_context(problem.tracking())
         x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
         owned.callback(x.destroy)
-        problem.retract()
-        problem.write_x(x)
+        if resume is None:
+            problem.retract()
+        else:  # the iterate is on 𝓜 already: no retraction, which would move it by round-off
+            problem.rows[: problem.owned] = resume.rows
+            problem.q.x.scatter_forward()
+            problem.held = None if resume.held is None else resume.held.copy()
+        problem.write_x(x, keep=True)
         g = x.duplicate()
         owned.callback(g.destroy)
         model = None
@@ -322,6 +402,9 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
                 adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
                 release=opts.getReal("frames_active_release", RELEASE_RATIO),
                 exact=hessian == "exact"))
+            if resume is not None and resume.adaptation is not None:
+                model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
+                             resume.step)
         tao = PETSc.TAO().create(comm)
         owned.callback(tao.destroy)
         tao.setOptionsPrefix(options_prefix)
@@ -336,6 +419,7 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
         if model is not None:
             tao.getKSP().setMonitor(guarded(count_linear))
             model.on_error = keep  # the shell's products, guarded too
+        original_tests = _continue_tests(tao, resume) if resume is not None else None
 
         start = time.perf_counter()
         try:
@@ -345,9 +429,34 @@ def _solve(problem, tao_type, options_prefix, monitor) -> SolveResult:
                 raise
         if errors:  # outside the except clause: no PETSc.Error chained to it
             raise _released(errors.pop())
-        wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+        wall = earlier + comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
         problem.set_from_x(tao.getSolution())
         reason = converged_reason_name(tao.getConvergedReason())
+        if original_tests is not None:
+            reason = _original_reason(original_tests, reason, history[-1]["gnorm"])
     iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
     return SolveResult(history=history, converged_reason=reason, iterations=iterations,
                        wall_time_s=wall)
+
+
+def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
+    """TAO's stopping tests of the solve ``resume`` comes from, on a TAO that restarts
+    there: the iterations left, and the relative gradient test |g| ≤ gttol |g₀| with the
+    original |g₀| as the absolute test it is now (TAO would divide by the new start's).
+    Returns the original (gatol, gttol)."""
+    gatol, grtol, gttol = tao.getTolerances()
+    original = (gatol, gttol)
+    if gttol > 0 and resume.tao_gnorm0 > 0:
+        gatol = max(gatol, gttol * resume.tao_gnorm0)
+    tao.setTolerances(gatol=gatol, grtol=grtol, gttol=0.0)
+    tao.setMaximumIterations(max(tao.getMaximumIterations() - resume.tao_iterations, 0))
+    return original
+
+
+def _original_reason(tests: tuple[float, float], reason: str, gnorm: float) -> str:
+    """The reason the original tests give where :func:`_continue_tests` rewrote them: a
+    gradient below the absolute tolerance only by the rewritten gttol test is GTTOL."""
+    gatol, gttol = tests
+    if reason == "CONVERGED_GATOL" and gnorm > gatol and gttol > 0:
+        return "CONVERGED_GTTOL"
+    return reason

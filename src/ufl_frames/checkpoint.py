@@ -1,0 +1,261 @@
+"""Checkpoints of a solve in the output folder, to resume it (``--resume DIR``).
+
+While TAO runs, the CLI writes ``DIR/checkpoint/state.npz`` every
+:data:`CHECKPOINT_EVERY` Newton steps and when interrupted; an interrupted run leaves
+only that folder, a completed one removes it (:class:`ufl_frames.io.OutputFolder`,
+``ours``). The file, written by rank 0 as a whole (a temporary file renamed over the
+last), holds:
+
+* ``q``, ``active``, ``held``: the iterate and the Newton model's active sets
+  (:class:`ufl_frames.solvers.SolverState`) per vertex, in the mesh's input node order:
+  the order of rank 0's Gmsh mesh, which meshing the same geometry with the same
+  options gives again, whatever the number of processes;
+* ``meta``: JSON with the format, the run's arguments (:func:`check_run` compares them
+  with the resuming run's), :func:`mesh_key` of the mesh, the state's scalars and history.
+"""
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ufl_frames.solvers.tao import SolverState
+
+__all__ = ["CHECKPOINT_EVERY", "FOLDER", "CheckpointError", "CheckpointFolder",
+           "CheckpointWriteError", "check_run", "mesh_key", "read", "restore"]
+
+#: Folder of the checkpoint inside the output folder, and its file.
+FOLDER = "checkpoint"
+FILE = "state.npz"
+#: Newton steps between two checkpoints (an interrupt writes one too).
+CHECKPOINT_EVERY = 10
+#: Version of the file's layout; another is refused.
+FORMAT = 1
+
+
+class CheckpointError(ValueError):
+    """No usable checkpoint, or one of another run (one-line message)."""
+
+
+class CheckpointWriteError(RuntimeError):
+    """A checkpoint could not be written (one-line message; a failure of the run)."""
+
+
+def _node_order(V) -> np.ndarray:
+    """Input node index of every local dof (owned and ghost) of the P1 space ``V``."""
+    geometry = V.mesh.geometry
+    nodes = np.asarray(geometry.input_global_indices, dtype=np.int64)
+    index_map = V.dofmap.index_map
+    order = np.full(index_map.size_local + index_map.num_ghosts, -1, dtype=np.int64)
+    # P1: the dofs of a cell are its vertices, in the order of its geometry nodes.
+    order[V.dofmap.list.ravel()] = nodes[geometry.dofmaps[0].ravel()]
+    return order
+
+
+def _gather(V, values: np.ndarray, comm) -> np.ndarray | None:
+    """The owned rows of ``values`` (local dof order) of every rank in input node order,
+    on rank 0 (None elsewhere)."""
+    n = V.dofmap.index_map.size_local
+    parts = comm.gather((_node_order(V)[:n], np.asarray(values)[:n]), root=0)
+    if comm.rank != 0:
+        return None
+    total = V.dofmap.index_map.size_global
+    out = np.zeros((total, *np.asarray(values).shape[1:]), dtype=np.asarray(values).dtype)
+    for index, part in parts:
+        out[index] = part
+    return out
+
+
+def mesh_key(mesh) -> str:
+    """SHA-256 of the mesh's vertex coordinates in input node order and its cell count
+    (collective; the same on every rank): a checkpoint of another mesh is refused."""
+    comm = mesh.comm
+    geometry = mesh.geometry
+    nodes = np.asarray(geometry.input_global_indices, dtype=np.int64)
+    parts = comm.gather((nodes, np.ascontiguousarray(geometry.x[:, :2])), root=0)
+    cells = mesh.topology.index_map(2).size_global
+    key = None
+    if comm.rank == 0:
+        count = int(max(int(p[0].max(initial=-1)) for p in parts) + 1)
+        x = np.zeros((count, 2))
+        for index, coords in parts:
+            x[index] = coords
+        digest = hashlib.sha256(np.int64([count, cells]).tobytes())
+        digest.update(np.ascontiguousarray(x).tobytes())
+        key = digest.hexdigest()
+    return comm.bcast(key, root=0)
+
+
+class CheckpointFolder:
+    """``out/checkpoint`` of a run (collective over ``comm``).
+
+    :meth:`save` writes a :class:`~ufl_frames.solvers.SolverState` there, creating the
+    folders it needs; :meth:`discard` removes what this run created (a checkpoint that
+    was there before, the one resumed from, stays).
+    """
+
+    def __init__(self, out, comm, run: dict, key: str, existing: bool = False):
+        self.out = Path(out)
+        self.path = self.out / FOLDER
+        self.comm, self.run, self.key = comm, run, key
+        self.existing = existing
+        self.saved = False  # by this run
+        self._created: list[Path] = []  # folders save() made, outermost first
+
+    def save(self, state: SolverState, V) -> None:
+        """Write ``state`` of the field on the P1 space ``V`` (collective)."""
+        q = _gather(V, state.rows, self.comm)
+        n = V.dofmap.index_map.size_local
+        flags = {}
+        for name in ("active", "held"):
+            array = getattr(state, name)
+            present = self.comm.allreduce(array is not None)
+            flags[name] = _gather(V, np.zeros(n, np.int8) if array is None
+                                  else array[:n].astype(np.int8), self.comm) if present else None
+        error = None
+        if self.comm.rank == 0:
+            meta = {
+                "format": FORMAT, "run": self.run, "mesh_key": self.key,
+                "history": state.history, "tao_iterations": state.tao_iterations,
+                "tao_gnorm0": state.tao_gnorm0, "wall_time_s": state.wall_time_s,
+                "step": state.step, "adaptation": state.adaptation,
+                "model_gnorm0": state.model_gnorm0,
+                "num_processes": self.comm.size,
+            }
+            arrays = {"q": q, **{k: v for k, v in flags.items() if v is not None}}
+            try:
+                self._write(json.dumps(meta), arrays)
+            except OSError as e:
+                error = f"cannot write the checkpoint in {str(self.path)!r}: {e.strerror or e}"
+        error = self.comm.bcast(error, root=0)
+        if error is not None:
+            raise CheckpointWriteError(error)
+        self.saved = True
+
+    def _write(self, meta: str, arrays: dict) -> None:
+        missing = []
+        folder = self.path
+        while not folder.exists():
+            missing.append(folder)
+            folder = folder.parent
+        for folder in reversed(missing):
+            folder.mkdir()
+            self._created.append(folder)
+        temporary = self.path / f".{FILE}.{os.getpid()}.tmp"
+        try:
+            with open(temporary, "wb") as f:
+                np.savez(f, meta=np.array(meta), **arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(temporary, self.path / FILE)
+        finally:
+            if temporary.exists():
+                temporary.unlink()
+
+    @property
+    def written(self) -> bool:
+        """Whether a checkpoint is there (one saved by this run, or the one resumed)."""
+        return self.existing or self.saved
+
+    def discard(self) -> None:
+        """Remove the checkpoint and the folders this run created for it, unless it was
+        there before the run (rank 0; any thread)."""
+        if self.comm.rank != 0 or self.existing:
+            return
+        for name in (FILE, *(p.name for p in self.path.glob(f".{FILE}.*.tmp"))):
+            try:
+                (self.path / name).unlink()
+            except OSError:
+                pass
+        while self._created:
+            try:
+                self._created.pop().rmdir()  # only if empty
+            except OSError:
+                break
+
+
+def read(out, comm) -> dict:
+    """The checkpoint in the output folder ``out``: its ``meta`` dict on every rank, its
+    arrays (``q``, ``active``, ``held``) under ``"arrays"`` on rank 0 (collective).
+    Raises :class:`CheckpointError` on every rank when there is none or it is unusable."""
+    out = Path(out)
+    result, error = None, None
+    if comm.rank == 0:
+        path = out / FOLDER / FILE
+        if not out.exists():
+            error = f"cannot resume: {str(out)!r} does not exist"
+        elif not out.is_dir():
+            error = f"cannot resume: {str(out)!r} is not a folder"
+        elif not path.is_file():
+            error = (f"cannot resume: {str(out)!r} holds no checkpoint ({FOLDER}/{FILE}): only "
+                     "an interrupted run leaves one")
+        else:
+            try:
+                with np.load(path, allow_pickle=False) as data:
+                    meta = json.loads(str(data["meta"]))
+                    arrays = {k: data[k] for k in data.files if k != "meta"}
+                if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+                    raise ValueError("unknown format")
+                result = (meta, arrays)
+            except (OSError, ValueError, KeyError, EOFError) as e:
+                error = f"cannot resume: the checkpoint {str(path)!r} is unreadable ({e})"
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise CheckpointError(" ".join(error.split()))
+    meta = comm.bcast(result[0] if result else None, root=0)
+    meta["arrays"] = result[1] if result else None
+    return meta
+
+
+#: The run's arguments that must match to resume, and how a user names them.
+_COMPARED = {
+    "geometry_id": "GEOMETRY (another file, or the file changed)",
+    "isotropic": "--isotropic",
+    "mesh_size": "--mesh-size",
+    "size_factor": "--size-factor",
+    "max_triangles": "--max-triangles",
+    "max_aspect": "--max-aspect",
+    "free_singularities": "--free-singularities",
+    "max_it": "--max-it",
+    "petsc_options": "the PETSc options",
+}
+
+
+def check_run(meta: dict, run: dict, out) -> None:
+    """Raise :class:`CheckpointError` if the checkpoint ``meta`` is of a run with other
+    arguments than ``run`` (the first that differs is named)."""
+    saved = meta.get("run", {})
+    for key, label in _COMPARED.items():
+        if saved.get(key) != run.get(key):
+            was, now = saved.get(key), run.get(key)
+            detail = "" if key == "geometry_id" else f": {was!r} then, {now!r} now"
+            raise CheckpointError(
+                f"cannot resume: the checkpoint in {str(out)!r} is of a run with other "
+                f"arguments ({label} differs{detail}); resume with the same GEOMETRY and "
+                "options, or start again with --force"
+            )
+
+
+def restore(meta: dict, V, comm) -> SolverState:
+    """The :class:`~ufl_frames.solvers.SolverState` of a checkpoint (:func:`read`) on this
+    rank's rows of the P1 space ``V`` (collective)."""
+    arrays = comm.bcast(meta["arrays"] if comm.rank == 0 else None, root=0)
+    order = _node_order(V)
+    n = V.dofmap.index_map.size_local
+    if arrays["q"].shape[0] != V.dofmap.index_map.size_global or order.min() < 0:
+        raise CheckpointError("cannot resume: the checkpoint's field does not fit the mesh")
+
+    def flags(name):
+        return arrays[name][order].astype(bool) if name in arrays else None
+
+    return SolverState(
+        rows=np.ascontiguousarray(arrays["q"][order[:n]]),
+        history=meta["history"], tao_iterations=int(meta["tao_iterations"]),
+        tao_gnorm0=float(meta["tao_gnorm0"]), wall_time_s=float(meta["wall_time_s"]),
+        step=float(meta["step"]),
+        adaptation=None if meta["adaptation"] is None else float(meta["adaptation"]),
+        model_gnorm0=None if meta["model_gnorm0"] is None else float(meta["model_gnorm0"]),
+        active=flags("active"), held=flags("held"),
+    )
