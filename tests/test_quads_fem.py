@@ -37,12 +37,16 @@ def test_piano_quads_have_exactly_the_fields_two_singularities(piano_fields, qua
     assert world["valid"] and world["problems"] == []
     assert world["interior_valence"].get("3") == 1 and world["interior_valence"].get("5") == 1
     assert world["irregular_vertices"] == 2 and world["irregular_boundary"] == 0
-    assert world["min_sj"] >= 0.5  # the target; measured 0.55-0.75
+    assert world["min_sj"] >= 0.5  # the target; measured 0.80-0.87 (0.55-0.75 extracted)
     assert world["mean_edge_length"] == pytest.approx(quad_size, rel=0.2)
     assert world["area_error"] < 0.01  # straight quad edges on the curved boundary
     for key in ("quads", "vertices", "interior_valence", "irregular_vertices"):
         assert found["self"][key] == world[key], key
-    assert found["self"]["min_sj"] == pytest.approx(world["min_sj"], rel=1e-6)
+    # as extracted, the meshes agree to solver tolerance; the improvement of the worst quads
+    # is a discrete search (accepts or not), so only its bound is the same
+    assert found["self"]["extracted"]["min_sj"] == pytest.approx(
+        world["extracted"]["min_sj"], rel=1e-6)
+    assert found["self"]["min_sj"] >= 0.5
 
 
 def test_quad_files_read_back(piano_fields, tmp_path):
@@ -84,4 +88,5 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     with pytest.raises(cli.RunError, match="cannot make quads of this field: .*quad size"):
         cli.run_solve("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True,
                       comm=COMM, quads=True, quad_size=2.0)
+    COMM.Barrier()  # rank 0 removes what the run wrote (its checkpoint folder)
     assert not (out / "b").exists()

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ufl_frames.io import create_missing
 from ufl_frames.solvers.tao import SolverState
 
 __all__ = ["CHECKPOINT_EVERY", "FOLDER", "CheckpointError", "CheckpointFolder",
@@ -135,14 +136,7 @@ class CheckpointFolder:
         self.saved = True
 
     def _write(self, meta: str, arrays: dict) -> None:
-        missing = []
-        folder = self.path
-        while not folder.exists():
-            missing.append(folder)
-            folder = folder.parent
-        for folder in reversed(missing):
-            folder.mkdir()
-            self._created.append(folder)
+        self._created += create_missing(self.path)
         temporary = self.path / f".{FILE}.{os.getpid()}.tmp"
         try:
             with open(temporary, "wb") as f:

@@ -835,6 +835,18 @@ def output_target(path) -> Path:
     return path.resolve() if path.is_symlink() else Path(os.path.abspath(path))
 
 
+def create_missing(folder: Path) -> list[Path]:
+    """Create ``folder`` and whichever of its parents are missing; the folders created,
+    outermost first (so that a caller can remove exactly those)."""
+    missing = []
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    for created in reversed(missing):
+        created.mkdir()
+    return missing[::-1]
+
+
 class OutputFolderBusy(OSError):
     """The output folder changed under this run (another run wrote it meanwhile)."""
 
@@ -883,14 +895,7 @@ class OutputFolder:
         def make():
             nonlocal result
             target = self._target()
-            missing = []
-            parent = target.parent
-            while not parent.exists():
-                missing.append(parent)
-                parent = parent.parent
-            for folder in reversed(missing):
-                folder.mkdir()
-                self._created.append(folder)
+            self._created += create_missing(target.parent)
             token = f"{os.getpid():x}{secrets.token_hex(4)}"
             staging = target.parent / f".{target.name}.ufl-frames-{token}.partial"
             try:
