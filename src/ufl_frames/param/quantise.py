@@ -325,11 +325,12 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
 
 
 def _repair(mesh, system, y0, F, F_fixed, d, response, param):
-    """Round again, the other way, the fixed quantities the folded triangles depend on
-    most (a boundary curve and a singular vertex rounded onto one line, say): at most
-    :data:`REPAIRS` times, each keeping the best of :data:`REPAIR_CANDIDATES` trials if it
-    folds fewer triangles and leaves every quantity an integer. Returns the map and the
-    number of quantities rounded again."""
+    """Move by one, to the other neighbouring integer and then away from it, each of the
+    :data:`REPAIR_CANDIDATES` fixed quantities the folded triangles depend on most (a
+    boundary curve and a singular vertex rounded onto one line, say): at most
+    :data:`REPAIRS` times, each keeping the best trial if it folds fewer triangles and
+    leaves every quantity an integer. Returns the map and the number of quantities
+    moved."""
     AT, b, T, scale = system
     seamless_values = F_fixed @ y0
     repaired = 0
@@ -340,9 +341,13 @@ def _repair(mesh, system, y0, F, F_fixed, d, response, param):
         rows = (2 * mesh.corners[bad].reshape(-1, 1) + np.arange(2)).ravel()
         influence = np.abs(T[rows] @ response).sum(axis=0)
         best = None
+        trials = []
         for i in np.argsort(-influence)[:REPAIR_CANDIDATES]:
+            toward = 1.0 if seamless_values[i] >= d[i] else -1.0  # the other neighbour first
+            trials += [(i, toward), (i, -toward)]
+        for i, step in trials:
             trial = d.copy()
-            trial[i] += 1.0 if seamless_values[i] >= d[i] else -1.0
+            trial[i] += step
             y = y0 - response @ (F_fixed @ y0 - trial)
             candidate, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, trial)
             values = F @ candidate.uv.ravel()
