@@ -51,7 +51,7 @@ DETERMINED = 1e-9
 #: A functional the fixed ones determine is taken to be off its integer beyond this.
 PARITY_TOLERANCE = 1e-4
 #: Rounds of fold repair (:func:`_repair`), and the quantities tried in each.
-REPAIRS, REPAIR_CANDIDATES = 4, 6
+REPAIRS, REPAIR_CANDIDATES = 4, 10
 #: Largest distance to an integer an integer functional may keep after the final solve.
 INTEGER_TOLERANCE = 1e-6
 
