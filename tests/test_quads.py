@@ -185,3 +185,46 @@ def test_improving_the_worst_quads_restores_a_skewed_grid_and_never_worsens():
         after = improve_worst_quads(noisy, q)
         assert scaled_jacobians(after, q).min() >= before - 1e-12
         assert check_quad_mesh(after, q, area=1.0) == []
+
+
+def test_every_integer_point_of_the_map_is_one_quad_corner():
+    """An independent count: the integer points of the fixed-point map found by brute force
+    (every lattice point of each triangle's box, exact orientation tests), named by where
+    they lie (a vertex; an edge and the parameter along it; inside a triangle), are the
+    quads' corners, each once, at the place the triangle's affine map puts them."""
+    from fractions import Fraction
+
+    x, cells = grid(20, 20, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, pair_field(x, (-0.11, 0.013), (0.12, 0.007)))
+    grid_map = quantise.quantise(mesh, 2.0)
+    assert mesh.cut.size > 0
+    P, unit = extract.fixed_point(grid_map), extract.UNIT
+    found = {}
+    for f in range(cells.shape[0]):
+        X = [tuple(int(c) for c in P[w]) for w in mesh.corners[f]]
+        box = [range(-(-min(p[k] for p in X) // unit), max(p[k] for p in X) // unit + 1)
+               for k in (0, 1)]
+        for i in box[0]:
+            for j in box[1]:
+                # barycentric coordinates as exact fractions
+                area = [(X[(k + 2) % 3][0] - X[(k + 1) % 3][0]) * (j * unit - X[(k + 1) % 3][1])
+                        - (X[(k + 2) % 3][1] - X[(k + 1) % 3][1]) * (i * unit - X[(k + 1) % 3][0])
+                        for k in range(3)]
+                if min(area) < 0:
+                    continue
+                weights = [Fraction(a, sum(area)) for a in area]
+                zero = [k for k in range(3) if area[k] == 0]
+                if len(zero) == 2:
+                    key = ("vertex", int(cells[f, 3 - sum(zero)]))
+                elif len(zero) == 1:
+                    a, b = sorted(int(cells[f, k]) for k in range(3) if k != zero[0])
+                    key = ("edge", a, b, weights[list(cells[f]).index(b)])
+                else:
+                    key = ("inside", f, i, j)
+                found[key] = sum(float(w) * x[v] for w, v in zip(weights, cells[f], strict=True))
+    quads = extract.extract_quads(grid_map)
+    assert quads.points.shape[0] == len(found)
+    expected = np.array(list(found.values()))
+    distance = np.linalg.norm(quads.points[:, None] - expected[None], axis=2)
+    assert distance.min(axis=1).max() < 1e-12
+    assert np.unique(distance.argmin(axis=1)).size == len(found)
