@@ -51,10 +51,9 @@ class ExtractionError(RuntimeError):
 
 @dataclass(frozen=True)
 class QuadMesh:
-    """A quad mesh: ``points`` (n, 2), ``quads`` (m, 4) counter-clockwise; ``grid`` (n, 2)
-    the integer (U, V) of each point in the chart of one triangle it lies in (for
-    pictures); ``chains`` the polyline (k, 2) under every quad edge, keyed by the sorted
-    point pair; ``boundary`` the boundary edges (b, 2)."""
+    """A quad mesh: ``points`` (n, 2), ``quads`` (m, 4) counter-clockwise; ``chains`` the
+    polyline (k, 2) under every quad edge (the traced iso-line, for pictures), keyed by the
+    sorted point pair; ``boundary`` the boundary edges (b, 2)."""
 
     points: np.ndarray
     quads: np.ndarray
