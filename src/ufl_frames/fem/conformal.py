@@ -38,6 +38,7 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
+from ufl_frames.fem.constraints import lumped_mass  # noqa: E402
 from ufl_frames.fem.energy import check_frame_function  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
 
@@ -111,7 +112,7 @@ def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.
     result = fem.Function(V, name="q")
     result.x.array[:] = odeco.frames_to_q(np.stack([length, length], axis=1), angles).ravel()
     result.x.scatter_forward()
-    mass = _lumped_mass(V)
+    mass = lumped_mass(V)[:owned_rows]
     norm_in = mesh.comm.allreduce(float(np.dot(mass, np.sum(rows[:owned_rows] ** 2, axis=1))),
                                   op=MPI.SUM)
     out_rows = result.x.array.reshape(-1, k)
@@ -119,14 +120,3 @@ def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.
         float(np.dot(mass, np.sum(out_rows[:owned_rows] ** 2, axis=1))), op=MPI.SUM)
     result.x.array[:] *= np.sqrt(norm_in / norm_out)
     return result
-
-
-def _lumped_mass(V) -> np.ndarray:
-    """The lumped P1 mass of every owned vertex row."""
-    S, to_blocked = V.sub(0).collapse()
-    w = ufl.TestFunction(S)
-    vector = fem.assemble_vector(fem.form(w * ufl.dx))
-    vector.scatter_reverse(dolfinx.la.InsertMode.add)
-    rows = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts)
-    rows[np.asarray(to_blocked) // odeco.NUM_COEFFICIENTS] = vector.array
-    return rows[:V.dofmap.index_map.size_local]

@@ -75,6 +75,16 @@ def _vertex_rows_of_facets(V, facets):
     return rows
 
 
+def lumped_mass(V) -> np.ndarray:
+    """The lumped mass ∫ φ_v dx of every local vertex row (owned and ghost) of the frame
+    space ``V``, read off the first component of the blocked space (collective)."""
+    ones = ufl.as_vector([1.0] + [0.0] * (odeco.NUM_COEFFICIENTS - 1))
+    lumped = fem.assemble_vector(fem.form(ufl.inner(ones, ufl.TestFunction(V)) * ufl.dx))
+    lumped.scatter_reverse(dolfinx.la.InsertMode.add)
+    lumped.scatter_forward()
+    return lumped.array.reshape(-1, odeco.NUM_COEFFICIENTS)[:, 0].copy()
+
+
 def frame_constraints(
     V,
     isotropic: bool = False,
@@ -119,15 +129,10 @@ def frame_constraints(
         psi = np.where(np.isfinite(exact), exact, psi)
     normals = np.stack([np.cos(psi), np.sin(psi)], axis=1)
 
-    # Lumped mass ∫ φ_v dx of every vertex, read off the first component of the blocked space.
-    ones = ufl.as_vector([1.0, 0.0, 0.0, 0.0, 0.0])
-    lumped = fem.assemble_vector(fem.form(ufl.inner(ones, ufl.TestFunction(V)) * ufl.dx))
-    lumped.scatter_reverse(dolfinx.la.InsertMode.add)
-    lumped.scatter_forward()
     return FrameConstraints(
         boundary=boundary,
         normals=normals,
-        weights=lumped.array.reshape(-1, odeco.NUM_COEFFICIENTS)[:, 0].copy(),
+        weights=lumped_mass(V),
         owned=index_map.size_local,
         isotropic=isotropic,
         comm=mesh.comm,
