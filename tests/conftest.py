@@ -2,6 +2,11 @@
 
 Modelled on DOLFINx's ``python/test/conftest.py``:
 
+* a watchdog: a test stuck for ``UFL_FRAMES_TEST_TIMEOUT`` seconds (600) dumps every
+  thread's traceback and exits, so that ``mpirun`` ends instead of waiting forever, and
+  under MPI a failure is named at once with its rank;
+* under MPI, one base temporary folder per rank (pytest's numbered folders are raced on
+  by ranks that start together);
 * after every test, ``gc.collect()`` and a barrier on ``MPI.COMM_WORLD``, so that collective
   destructors (PETSc objects, DOLFINx meshes) run in step on all ranks;
 * tests marked ``serial`` are skipped when ``MPI.COMM_WORLD`` has more than one rank;
@@ -22,9 +27,11 @@ restore, and ``annulus_mesh`` skips the tests that ask for it when DOLFINx is mi
 
 from __future__ import annotations
 
+import faulthandler
 import gc
 import os
 import sys
+import threading
 from typing import TYPE_CHECKING
 
 # One BLAS thread per process, as in the Makefile (effective if NumPy is not loaded yet):
@@ -115,6 +122,50 @@ def annulus_mesh():
     return _annulus_mesh
 
 
+# A test that runs longer than this is stuck (the slowest takes under a minute): dump every
+# thread's traceback and exit, which under mpirun ends all ranks. Without it, a test that
+# fails on one rank between two collectives leaves the others waiting forever.
+TEST_TIMEOUT_S = float(os.environ.get("UFL_FRAMES_TEST_TIMEOUT", "600"))
+
+
+def _stuck(item, config):
+    """The watchdog's end: pytest's capture off (so the lines reach the log), tracebacks, exit."""
+    capture = config.pluginmanager.getplugin("capturemanager")
+    if capture is not None:
+        capture.suspend_global_capture(in_=True)
+    sys.stderr.write(f"\n{item.nodeid}: stuck for {TEST_TIMEOUT_S:g} s; tracebacks:\n")
+    sys.stderr.flush()
+    faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+    sys.stderr.flush()
+    os._exit(1)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Exit with tracebacks if one test, with its fixtures' setup and teardown (module-scoped
+    ones included), runs past ``TEST_TIMEOUT_S``."""
+    timer = threading.Timer(TEST_TIMEOUT_S, _stuck, args=(item, item.config))
+    timer.daemon = True
+    timer.start()
+    try:
+        return (yield)
+    finally:
+        timer.cancel()
+
+
+def pytest_runtest_logreport(report):
+    """Under MPI, name a failure at once, with its rank: pytest's summary comes only at the
+    end, which a rank stuck in a collective never reaches."""
+    MPI = _mpi()
+    if not report.failed or MPI is None or MPI.COMM_WORLD.size == 1:
+        return
+    text = str(report.longrepr).splitlines()
+    detail = "\n".join(text[-15:])
+    sys.__stderr__.write(f"\n[rank {MPI.COMM_WORLD.rank}] FAILED {report.nodeid} ({report.when})\n"
+                         f"{detail}\n")
+    sys.__stderr__.flush()
+
+
 @pytest.fixture(autouse=True)
 def _collective_cleanup():
     """gc.collect() and a barrier after each test (collective destructors in step)."""
@@ -135,6 +186,35 @@ def _restore_petsc_options():
 
     with options_scope():
         yield
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
+    """Under MPI, a base temporary folder per rank in one new folder of the run (unless
+    ``--basetemp`` is given): pytest's numbered ``pytest-of-<user>/pytest-N`` folders are
+    made and pruned by each process on its own, which two ranks starting together race on."""
+    MPI = _mpi()
+    if MPI is None or MPI.COMM_WORLD.size == 1 or config.option.basetemp:
+        return
+    import tempfile
+
+    comm = MPI.COMM_WORLD
+    run = tempfile.mkdtemp(prefix="ufl-frames-pytest-mpi-") if comm.rank == 0 else None
+    config.option.basetemp = os.path.join(comm.bcast(run, root=0), f"rank{comm.rank}")
+    config._ufl_frames_mpi_run = run
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Remove the per-rank temporary folders of a passing MPI run (kept when it fails)."""
+    run = getattr(session.config, "_ufl_frames_mpi_run", None)
+    MPI = _mpi()
+    if MPI is None or not hasattr(session.config, "_ufl_frames_mpi_run"):
+        return
+    worst = MPI.COMM_WORLD.allreduce(int(exitstatus), op=MPI.MAX)
+    if run is not None and worst == 0:
+        import shutil
+
+        shutil.rmtree(run, ignore_errors=True)
 
 
 def pytest_collection_modifyitems(config, items):

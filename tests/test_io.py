@@ -100,8 +100,9 @@ def test_field_functions():
 def test_write_field_vtx(shared_tmp):
     assert dolfinx.io.has_adios2, "this DOLFINx build should have ADIOS2"
     paths = io.write_field(shared_tmp, twisted_field(square_mesh(4)))
+    root_paths = COMM.bcast(paths, root=0)  # collectives first, then rank-local asserts
     assert paths[:2] == [shared_tmp / "frames.bp", shared_tmp / "frames.pvd"]
-    assert paths == COMM.bcast(paths, root=0)  # the same list on every rank
+    assert paths == root_paths  # the same list on every rank
     assert (paths[0] / "md.idx").is_file()
     assert all(p.exists() for p in paths)
     metadata = b"".join(p.read_bytes() for p in paths[0].glob("md.*"))
@@ -127,6 +128,10 @@ def test_write_field_vtk_reads_back(shared_tmp):
     mesh = square_mesh(4)
     q = twisted_field(mesh)
     paths = io.write_field(shared_tmp, q)
+    # The collective parts first: an assertion failing on one rank must not leave the
+    # other waiting in a collective.
+    H = energy.integrability_energy(q)
+    f = io.bracket_rms(q)
     data = io.read_vtk(shared_tmp / "frames.pvd")
     x, cells = data["points"], data["cells"]
     assert set(data["point_data"]) == {"q", "lengths", "u", "v"}
@@ -150,10 +155,8 @@ def test_write_field_vtk_reads_back(shared_tmp):
     e1, e2 = x[cells[:, 1], :2] - x[cells[:, 0], :2], x[cells[:, 2], :2] - x[cells[:, 0], :2]
     area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     rms = data["cell_data"]["bracket_rms"]
-    H = energy.integrability_energy(q)
     assert math.isclose(0.5 * float(np.sum(area * rms**2)), H, rel_tol=1e-12)
     # ... and equals the DG0 function cell by cell (matched by barycentre).
-    f = io.bracket_rms(q)
     owned = mesh.topology.index_map(2).size_local
     centres = f.function_space.tabulate_dof_coordinates()[:owned, :2]
     mine = {tuple(c): v for c, v in zip(centres.round(10), f.x.array[:owned], strict=True)}
