@@ -193,6 +193,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "
                        "triangles)")
+    solve.add_argument("--levels", type=_positive_int, default=1, metavar="L",
+                       help="nested iteration over L meshes: MBO and a solve on the mesh of "
+                       "size 2^(L-1) times the requested one, then each finer mesh from the "
+                       "coarser solution (default 1: one mesh; not with a .msh, --resume or "
+                       "--conformal)")
     solve.add_argument("-q", "--quiet", action="store_true", help="no progress output")
 
     commands.add_parser("info", help="print the versions of the libraries in use",
@@ -358,12 +363,30 @@ def default_output_folder(geometry: str) -> Path:
 # --- the pipeline -------------------------------------------------------------------------
 
 
+#: At most this many levels of nested iteration (each halves the mesh size).
+MAX_LEVELS = 8
+
+
 def _check_parameters(mesh_size, max_it) -> None:
     real = isinstance(mesh_size, (int, float)) and not isinstance(mesh_size, bool)
     if mesh_size is not None and not (real and math.isfinite(mesh_size) and mesh_size > 0):
         raise InputError(f"mesh size must be a positive number, got {mesh_size!r}")
     if isinstance(max_it, bool) or not isinstance(max_it, int) or not 0 < max_it <= MAX_INT:
         raise InputError(f"max-it must be a positive integer at most {MAX_INT}, got {max_it!r}")
+
+
+def _check_levels(levels, geometry: str, resume, conformal: bool) -> None:
+    """What nested iteration needs: a whole number of levels, a geometry Gmsh meshes."""
+    if isinstance(levels, bool) or not isinstance(levels, int) or not 0 < levels <= MAX_LEVELS:
+        raise InputError(f"levels must be an integer from 1 to {MAX_LEVELS}, got {levels!r}")
+    if levels == 1:
+        return
+    if str(geometry).lower().endswith(".msh"):
+        raise InputError("--levels needs a geometry Gmsh can mesh at several sizes, not a .msh")
+    if resume is not None:
+        raise InputError("--levels and --resume cannot be combined (a checkpoint is of one mesh)")
+    if conformal:
+        raise InputError("--levels and --conformal cannot be combined (no TAO solve to nest)")
 
 
 def run_solve(
@@ -385,6 +408,7 @@ def run_solve(
     quads: bool = False,
     conformal: bool = False,
     resume=None,
+    levels: int = 1,
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
     :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
@@ -394,7 +418,9 @@ def run_solve(
     Collective over ``comm`` (default ``MPI.COMM_WORLD``). Raises :class:`InputError`
     (for a :class:`ufl_frames.geometry.GeometryError`, a bad parameter or PETSc option in
     the database, an existing non-empty ``out``) on every rank, before anything is
-    computed or written, when the input is unusable; :class:`RunError` when a solve or
+    computed or written, when the input is unusable; ``levels`` > 1: nested iteration
+    (:meth:`~ufl_frames.pipeline.FrameField.nested`) over meshes of size factors
+    2^(levels-1) … 1 of ``size_factor``; :class:`RunError` when a solve or
     writing the results fails on every rank alike (a PETSc error, a full disk); other
     exceptions are bugs and keep their type. ``out`` is written whole or not at all
     (:class:`ufl_frames.io.OutputFolder`). PETSc options in the database
@@ -419,13 +445,15 @@ def run_solve(
         out = resume
     out = default_output_folder(geometry) if out is None else Path(out)
     _check_parameters(mesh_size, max_it)
+    _check_levels(levels, geometry, resume, conformal)
     problem = petsc_option_problem(user_options)
     if problem is not None:
         raise InputError(problem)
     run = _run_record(geometry, comm, isotropic=isotropic, mesh_size=mesh_size,
                       size_factor=size_factor, max_triangles=max_triangles,
                       max_aspect=max_aspect, free_singularities=free_singularities,
-                      max_it=max_it, conformal=conformal, petsc_options=user_options)
+                      max_it=max_it, conformal=conformal, levels=levels,
+                      petsc_options=user_options)
     saved = None
     if resume is not None:
         try:
@@ -445,6 +473,14 @@ def run_solve(
         raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
     except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
+    coarse = []  # nested iteration: the coarser meshes, coarsest first
+    for k in range(levels - 1, 0, -1):
+        say(f"meshing level {levels - 1 - k} (size factor {2**k:g}) ...")
+        try:
+            coarse.append(geometry_module.build(comm, geometry, mesh_size,
+                                                size_factor * 2**k, **limit))
+        except geometry_module.GeometryError as e:
+            raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
     interrupts.set_stage("the MBO initial field")
     interrupts.checkpoint(comm)
     for note in domain.notes:
@@ -462,7 +498,8 @@ def run_solve(
                                 isotropic=isotropic, max_it=max_it, force=force, quiet=quiet,
                                 max_aspect=max_aspect, free_singularities=free_singularities,
                                 size_factor=size_factor, param=param, quad_size=quad_size,
-                                quads=quads, conformal=conformal, user_options=user_options)
+                                quads=quads, conformal=conformal, user_options=user_options,
+                                coarse=coarse)
     except KeyboardInterrupt:  # Interrupted too: the checkpoint, if any, is for --resume
         raise
     except BaseException:
@@ -503,9 +540,10 @@ def _run_record(geometry: str, comm, **arguments) -> dict:
 
 def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, isotropic,
                      max_it, force, quiet, max_aspect, free_singularities, size_factor,
-                     param, quad_size, quads, conformal, user_options) -> dict:
+                     param, quad_size, quads, conformal, user_options, coarse=()) -> dict:
     """MBO → TAO (from ``saved``, a checkpoint, if given; checkpoints into ``store``) →
-    singularities → files in ``out``: the rest of :func:`run_solve`."""
+    singularities → files in ``out``: the rest of :func:`run_solve`. With ``coarse``
+    domains, nested iteration from the coarsest to ``domain`` instead."""
     from mpi4py import MPI
     from petsc4py import PETSc
 
@@ -532,10 +570,11 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
         interrupts.checkpoint(comm, signum)
 
     with options_scope():  # the solvers' defaults end with the run
-        say("MBO initial field ...")
-        with _failures("the MBO initial field"):
-            field = FrameField.initial(domain, isotropic=isotropic, max_aspect=max_aspect,
-                                       monitor=mbo_monitor)
+        if not coarse:  # nested iteration runs MBO on its coarsest mesh only
+            say("MBO initial field ...")
+            with _failures("the MBO initial field"):
+                field = FrameField.initial(domain, isotropic=isotropic, max_aspect=max_aspect,
+                                           monitor=mbo_monitor)
         tao_type = PETSc.Options().getString("tao_type", solvers.DEFAULT_OPTIONS["tao_type"])
         kind = "isotropic frames" if isotropic else "frames"
         state = None  # the checkpoint resumed from
@@ -546,6 +585,27 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             with _failures("the conformal-scale solve"):
                 field.conformal()
             result = None
+        elif coarse:
+            interrupts.set_stage(f"the TAO solve ({tao_type}), nested")
+            interrupts.checkpoint(comm)
+
+            def interruptible(state):  # no checkpoints: --resume is refused with --levels
+                interrupts.checkpoint(comm, interrupts.pending(comm))
+
+            def level_done(entry):
+                say(f"mesh {entry['level'] + 1}/{len(coarse) + 1}: {entry['triangles']} "
+                    f"triangles, {entry['reason']} after {entry['iterations']} iterations "
+                    f"({entry['seconds']:.2f} s), H {entry['H']:.4e}")
+
+            say(f"solving ({kind}, TAO {tao_type}), nested over {len(coarse) + 1} meshes "
+                f"from {coarse[0].num_cells} triangles ...")
+            with _failures(f"the TAO solve ({tao_type})"):
+                field = FrameField.nested(
+                    [*coarse, domain], isotropic=isotropic, max_aspect=max_aspect,
+                    pin_singularities=not free_singularities, max_it=max_it,
+                    monitor=tao_monitor, mbo_monitor=mbo_monitor, level_monitor=level_done,
+                    checkpoint=interruptible)
+            result = field.result
         else:
             interrupts.set_stage(f"the TAO solve ({tao_type})")
             interrupts.checkpoint(comm)
@@ -885,6 +945,7 @@ def main(argv: list[str] | None = None) -> int:
                         quad_size=args.quad_size,
                         quads=args.quads,
                         conformal=args.conformal,
+                        levels=args.levels,
                     )
                 except Exception as e:
                     watch.stage = "reporting the failure"

@@ -69,6 +69,9 @@ class FrameField:
     #: The last :meth:`quadrangulate`'s quad mesh (on rank 0; None elsewhere), its measures.
     quad_mesh: object | None = field(default=None, repr=False)
     quad_quality: dict | None = None
+    #: Per level of :meth:`nested` (coarse to fine): triangles, iterations, H, reason,
+    #: seconds; None for a one-mesh solve.
+    levels: list[dict] | None = None
 
     @classmethod
     def initial(
@@ -90,6 +93,67 @@ class FrameField:
                    max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
                    constraints=constraints, singularities=singularities.locate_singularities(q))
 
+    def transferred(self, domain: Domain) -> "FrameField":
+        """This field carried to another mesh of the same shape (collective): q interpolated
+        at the new vertices (:func:`~ufl_frames.fem.transfer.interpolate_field`), the new
+        mesh's boundary directions and constraints; the solver's retraction puts q on the
+        frame manifold there. The start of a finer level of :meth:`nested`."""
+        from ufl_frames.fem.transfer import interpolate_field
+
+        q = interpolate_field(self.q, domain.mesh)
+        angles = domain.boundary_angles(q.function_space)
+        constraints = frame_constraints(q.function_space, boundary_angles=angles)
+        return FrameField(domain=domain, q=q, isotropic=self.isotropic,
+                          max_aspect=self.max_aspect, boundary_angles=angles,
+                          constraints=constraints,
+                          singularities=singularities.locate_singularities(q))
+
+    @classmethod
+    def nested(cls, domains, isotropic: bool = False,
+               max_aspect: float | None = DEFAULT_MAX_ASPECT, pin_singularities: bool = True,
+               max_it: int | None = None, monitor=None, mbo_monitor=None,
+               level_monitor=None, options_prefix: str = "", checkpoint=None) -> "FrameField":
+        """Nested iteration: MBO and a solve on the coarsest of ``domains`` (meshes of one
+        shape, coarse to fine), then on each finer one a solve from the coarser solution
+        (:meth:`transferred`); returns the field on the finest (collective).
+
+        Every level stops at the accuracy asked of the whole solve: the gradient tests are
+        relative to the coarsest level's |g₀| (``reference_gradient`` of
+        :func:`ufl_frames.solvers.solve`). With ``pin_singularities`` each level holds the
+        singular triangles of its own start, so the singularities are MBO's, carried
+        down. ``monitor`` gets every level's history entries, ``mbo_monitor`` the MBO
+        levels, ``checkpoint`` every level's states (as for :meth:`solve`; an exception
+        from it ends the whole run), ``level_monitor(entry)`` a summary per level
+        ({"level", "triangles", "iterations", "H", "reason", "seconds"}); the finest
+        field's :attr:`levels` lists those summaries.
+        """
+        import time
+
+        domains = list(domains)
+        if not domains:
+            raise ValueError("nested iteration needs at least one domain")
+        field, reference, levels = None, None, []
+        for k, domain in enumerate(domains):
+            start = time.perf_counter()
+            if field is None:
+                field = cls.initial(domain, isotropic=isotropic, max_aspect=max_aspect,
+                                    monitor=mbo_monitor)
+            else:
+                field = field.transferred(domain)
+            result = field.solve(pin_singularities=pin_singularities, max_it=max_it,
+                                 monitor=monitor, options_prefix=options_prefix,
+                                 checkpoint=checkpoint, reference_gradient=reference)
+            if reference is None:
+                reference = result.history[0]["gnorm"]
+            levels.append({"level": k, "triangles": domain.num_cells,
+                           "iterations": result.iterations, "H": result.H_final,
+                           "reason": result.converged_reason,
+                           "seconds": time.perf_counter() - start})
+            if level_monitor is not None:
+                level_monitor(levels[-1])
+        field.levels = levels
+        return field
+
     def conformal(self, options_prefix: str = "conformal_") -> "FrameField":
         """Make the field the integrable isotropic field of its own directions: lengths
         e^{−φ} from the conformal-scale Poisson problem ∫ ∇φ·∇w = ∫ R∇t·∇w
@@ -104,13 +168,15 @@ class FrameField:
 
     def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
               options_prefix: str = "", checkpoint=None,
-              resume: solvers.SolverState | None = None) -> solvers.SolveResult:
+              resume: solvers.SolverState | None = None,
+              reference_gradient: float | None = None) -> solvers.SolveResult:
         """Minimise H from the current field with TAO (:func:`ufl_frames.solvers.solve`);
         ``q`` holds the result, ``singularities`` are found again (collective).
 
         ``checkpoint`` and ``resume`` as for :func:`~ufl_frames.solvers.solve`: a solve
         resumed on the field :meth:`initial` made (its constraints and pinned vertices
-        are those of the original start) ends as the original would have."""
+        are those of the original start) ends as the original would have;
+        ``reference_gradient`` as there (nested iteration: see :meth:`nested`)."""
         self.problem = solvers.frame_problem(
             self.q, isotropic=self.isotropic, pin_singularities=pin_singularities,
             max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
@@ -118,7 +184,7 @@ class FrameField:
         )
         self.result = solvers.solve(self.problem, max_it=max_it, monitor=monitor,
                                    options_prefix=options_prefix, checkpoint=checkpoint,
-                                   resume=resume)
+                                   resume=resume, reference_gradient=reference_gradient)
         self.singularities = singularities.locate_singularities(self.q)
         self.pinned_singularities = pin_singularities
         return self.result
@@ -280,6 +346,8 @@ class FrameField:
                 "E_final": result.E_final,
                 "wall_time_s": result.wall_time_s,
             })
+        if self.levels is not None:
+            record["levels"] = self.levels
         record["singularities"] = self.singularities
         record["poincare_hopf"] = self.index_theorem()
         if self.param_quality is not None:

@@ -205,6 +205,7 @@ def solve(
     monitor=None,
     checkpoint=None,
     resume: SolverState | None = None,
+    reference_gradient: float | None = None,
 ) -> SolveResult:
     """Minimise H over 𝓜 from ``problem.q`` with TAO; ``problem.q`` holds the result.
 
@@ -228,6 +229,10 @@ def solve(
       test compares with |g₀| only, which, at a stationary start, is round-off: its
       target (1e-6 of that) is out of reach and the solve ran to ``max_it``. G, not an
       absolute number, because the gradient norm depends on the domain's size.
+      ``reference_gradient`` (a coarser level's |g₀| in nested iteration) raises G to it:
+      a fine level that starts from a coarse solution stops at the accuracy the whole
+      solve was asked for, not 1e-6 of its own, already small, |g₀| (the scaled unknowns
+      make gradient norms comparable across meshes of one domain).
 
     Both are tested by TAO before the first step, for every TAO type (0 iterations).
     """
@@ -239,7 +244,8 @@ def solve(
     if max_it is not None:
         options["tao_max_it"] = max_it
     gttol = opts.getReal("tao_gttol", float(options["tao_gttol"]))
-    options.setdefault("tao_gatol", gttol * problem.gradient_scale)
+    scale = max(problem.gradient_scale, reference_gradient or 0.0)
+    options.setdefault("tao_gatol", gttol * scale)
     options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
         return _solve(problem, tao_type, options_prefix, monitor, checkpoint, resume)

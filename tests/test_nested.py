@@ -1,0 +1,117 @@
+"""Nested iteration: a frame field carried between meshes of one domain, and the solve
+that goes from a coarse mesh to a fine one (:meth:`FrameField.nested`, ``--levels``).
+
+Serial and under MPI (``mpirun -n 2 python -m pytest -m "not serial"``).
+"""
+
+import dolfinx.fem
+import numpy as np
+import pytest
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ufl_frames import cli, geometry, solvers
+from ufl_frames.fem import energy
+from ufl_frames.fem.transfer import interpolate_field
+from ufl_frames.pipeline import FrameField
+
+COMM = MPI.COMM_WORLD
+
+
+def affine(x):
+    """Five affine coefficients: what a P1 field on any mesh reproduces exactly."""
+    return np.stack([1.0 + 0.3 * x[0] - 0.2 * x[1], 0.5 * x[0], -0.4 * x[1] + 0.1,
+                     0.2 + x[0] + x[1], 0.7 - 0.6 * x[0]])
+
+
+@pytest.mark.parametrize("shape", ["piano", "annulus"])
+def test_interpolate_field_reproduces_affine_fields(shape):
+    """Between two independent Gmsh meshes of a curved domain (fine boundary vertices
+    lie outside the coarse polygon): an affine field comes through exactly."""
+    coarse = geometry.build(COMM, shape, mesh_size=0.2)
+    fine = geometry.build(COMM, shape, mesh_size=0.07)
+    q = energy.frame_space(coarse.mesh)
+    f = dolfinx.fem.Function(q)
+    f.interpolate(affine)
+    g = interpolate_field(f, fine.mesh)
+    x = g.function_space.tabulate_dof_coordinates().T
+    expected = affine(x).T.ravel()
+    np.testing.assert_allclose(g.x.array, expected, rtol=0, atol=1e-12)
+
+
+def test_interpolate_field_refuses_another_domain():
+    piano = geometry.build(COMM, "piano", mesh_size=0.2)
+    annulus = geometry.build(COMM, "annulus", mesh_size=0.2)
+    f = FrameField.initial(piano).q
+    with pytest.raises(ValueError, match="not the same domain"):
+        interpolate_field(f, annulus.mesh)
+
+
+@pytest.fixture(scope="module")
+def piano_nested():
+    domains = [geometry.build(COMM, "piano", mesh_size=0.1, size_factor=2.0 ** k)
+               for k in (1, 0)]
+    levels = []
+    field = FrameField.nested(domains, max_it=300, level_monitor=levels.append)
+    return domains, field, levels
+
+
+def test_nested_ends_converged_on_the_fine_mesh(piano_nested):
+    """The fine level stops on the whole solve's tolerance: its last gradient is below
+    1e-6 of the coarse MBO start's |g₀| (computed again here, independently), and the
+    result lies on the frame manifold of the fine mesh (the retraction leaves it)."""
+    domains, field, levels = piano_nested
+    assert [e["triangles"] for e in levels] == [d.num_cells for d in domains]
+    assert field.levels == levels and field.domain is domains[-1]
+    assert all(e["reason"].startswith("CONVERGED") for e in levels)
+    tolerance = 1e-6 * max(coarse_start_gradient(domains[0]), field.problem.gradient_scale)
+    assert field.result.history[-1]["gnorm"] <= tolerance * (1 + 1e-9)
+    assert field.result.history[0]["gnorm"] > tolerance  # the fine level had work to do
+    rows = field.problem.rows.copy()
+    field.problem.retract()
+    np.testing.assert_allclose(field.problem.rows, rows, atol=1e-12)
+
+
+def coarse_start_gradient(domain):
+    """|g₀| of the MBO start on the coarsest mesh, computed again."""
+    start = FrameField.initial(domain)
+    problem = solvers.frame_problem(start.q, constraints=start.constraints)
+    g = PETSc.Vec().createMPI((problem.owned * 5, PETSc.DETERMINE), comm=COMM)
+    problem.riemannian_gradient(g)
+    value = g.norm()
+    g.destroy()
+    return value
+
+
+def test_nested_keeps_the_singularities(piano_nested):
+    """MBO's +1/4 and −1/4 of the coarse mesh, carried to the fine one and held there."""
+    _, field, _ = piano_nested
+    assert sorted(s["index"] for s in field.singularities) == [-0.25, 0.25]
+    assert field.index_theorem()["agrees"]
+
+
+def test_nested_fine_level_is_cheaper_than_a_cold_start(piano_nested):
+    """The point of nesting: from the coarse solution the fine mesh needs fewer Newton
+    steps than from its own MBO field, and reaches an H no higher (to 1 %)."""
+    domains, field, levels = piano_nested
+    cold = FrameField.initial(domains[-1])
+    result = cold.solve(max_it=300)
+    assert levels[-1]["iterations"] < result.iterations
+    assert levels[-1]["H"] <= 1.01 * result.H_final
+
+
+@pytest.mark.parametrize("arguments, words", [
+    ({"levels": 0}, "levels must be an integer"),
+    ({"levels": 2.5}, "levels must be an integer"),
+    ({"levels": 2, "conformal": True}, "--conformal"),
+])
+def test_run_solve_refuses_bad_levels(arguments, words, tmp_path):
+    with pytest.raises(cli.InputError, match=words):
+        cli.run_solve("piano", mesh_size=0.2, out=tmp_path / "out", quiet=True, comm=COMM,
+                      **arguments)
+
+
+def test_run_solve_refuses_levels_on_a_msh(tmp_path):
+    with pytest.raises(cli.InputError, match="not a .msh"):
+        cli.run_solve(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
+                      quiet=True, comm=COMM)
