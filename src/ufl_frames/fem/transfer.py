@@ -40,13 +40,34 @@ def interpolate_field(q_from: fem.Function, mesh_to, padding: float | None = Non
     tdim = mesh_to.topology.dim
     cell_map = mesh_to.topology.index_map(tdim)
     cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
-    data = fem.create_interpolation_data(V_to, V_from, cells, padding=padding)
-    lost = mesh_to.comm.allreduce(int(np.count_nonzero(data.src_owner < 0)), op=MPI.SUM)
-    if lost:  # DOLFINx would give those points the value 0: a zero frame, silently
-        raise ValueError(f"{lost} interpolation points of the target mesh lie farther than "
-                         f"{padding:.3g} from the source mesh: not the same domain")
+    # Two passes: a tight one for the cells inside the source mesh (a padded search costs
+    # ~15x more: 3.3 s instead of 0.2 s at 7.5e3 triangles), then the padded one for the
+    # few cells with a vertex outside it (along a curved boundary).
+    data = fem.create_interpolation_data(V_to, V_from, cells, padding=1e-10 * padding)
+    per_cell = V_to.element.interpolation_points.shape[0]
+    outside = np.unique(np.flatnonzero(data.src_owner < 0) // per_cell).astype(np.int32)
     q = fem.Function(V_to, name="q")
-    q.interpolate_nonmatching(q_from, cells, data)
+    if mesh_to.comm.allreduce(len(outside), op=MPI.SUM) == 0:
+        q.interpolate_nonmatching(q_from, cells, data)
+    else:
+        inside = np.setdiff1d(cells, cells[outside]).astype(np.int32)
+        data = fem.create_interpolation_data(V_to, V_from, inside, padding=1e-10 * padding)
+        q.interpolate_nonmatching(q_from, inside, data)
+        near = cells[outside]
+        data = fem.create_interpolation_data(V_to, V_from, near, padding=padding)
+        lost = mesh_to.comm.allreduce(int(np.count_nonzero(data.src_owner < 0)), op=MPI.SUM)
+        if lost:  # DOLFINx would give those points the value 0: a zero frame, silently
+            raise ValueError(f"{lost} interpolation points of the target mesh lie farther "
+                             f"than {padding:.3g} from the source mesh: not the same domain")
+        values = q.x.array.copy()
+        q.interpolate_nonmatching(q_from, near, data)
+        # interpolate_nonmatching writes the dofs of its cells only; keep the inner pass's
+        # values elsewhere (a vertex shared by both kinds of cells gets the same value).
+        touched = np.unique(V_to.dofmap.list[near].ravel())
+        keep = np.setdiff1d(np.arange(len(values) // V_to.dofmap.index_map_bs), touched)
+        bs = V_to.dofmap.index_map_bs
+        rows = q.x.array.reshape(-1, bs)
+        rows[keep] = values.reshape(-1, bs)[keep]
     q.x.scatter_forward()
     return q
 
