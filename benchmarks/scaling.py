@@ -57,8 +57,12 @@ REFERENCE_H_005 = 1.1225e-3
 
 
 def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
-            quads: bool = False) -> dict:
-    """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0)."""
+            quads: bool = False, levels: int = 1) -> dict:
+    """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0).
+
+    With ``levels`` > 1, nested iteration (:meth:`FrameField.nested`): ``mesh`` meshes
+    every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``), and the
+    Newton and Krylov counts are the finest level's (every level's in ``levels``)."""
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc([sys.argv[0], *petsc_argv])
@@ -83,9 +87,18 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
             print(f"  {name}: {stages[name]:.2f} s", file=sys.stderr, flush=True)
         return value
 
-    domain = stage("mesh", lambda: geometry.build(comm, shape, h))
-    field = stage("mbo", lambda: FrameField.initial(domain, isotropic=kind == "iso"))
-    result = stage("solve", lambda: field.solve(max_it=max_it))
+    if levels > 1:
+        domains = stage("mesh", lambda: [geometry.build(comm, shape, h, 2.0**k)
+                                         for k in range(levels - 1, -1, -1)])
+        domain = domains[-1]
+        stages["mbo"] = cpu["mbo"] = 0.0
+        field = stage("solve", lambda: FrameField.nested(domains, isotropic=kind == "iso",
+                                                         max_it=max_it))
+        result = field.result
+    else:
+        domain = stage("mesh", lambda: geometry.build(comm, shape, h))
+        field = stage("mbo", lambda: FrameField.initial(domain, isotropic=kind == "iso"))
+        result = stage("solve", lambda: field.solve(max_it=max_it))
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
@@ -108,7 +121,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         "ksp_max": max(newton) if newton else None, "ksp_per_step": krylov,
         "H_final": result.H_final, "peak_rss_mb": peak_kb / 1024,
         "singularities": sorted(s["index"] for s in field.singularities),
-        "quads": quad_record,
+        "quads": quad_record, "levels": field.levels,
     }
 
 
@@ -124,7 +137,8 @@ def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
     """Run one (case, h) in a fresh process; the record, or its failure."""
     command = [sys.executable, str(Path(__file__).resolve()), "--one", case, repr(h),
                "--max-it", str(args.max_it), "--record", str(partial),
-               *(["--quads"] if args.quads else []), *petsc_argv]
+               *(["--quads"] if args.quads else []), "--levels", str(args.levels),
+               *petsc_argv]
     if ranks > 1:
         mpirun = Path(sys.executable).with_name("mpirun")
         command = [str(mpirun) if mpirun.exists() else "mpirun", "-n", str(ranks), *command]
@@ -275,6 +289,8 @@ def parse_args(argv=None):
     parser.add_argument("--json", type=Path, default=None, help="write all records here")
     parser.add_argument("--one", nargs=2, metavar=("CASE", "H"), help=argparse.SUPPRESS)
     parser.add_argument("--record", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--levels", type=int, default=1, metavar="L",
+                        help="nested iteration over L meshes (FrameField.nested; default 1)")
     parser.add_argument("--quads", action="store_true",
                         help="also make the quad mesh (default quad size) and time its stages")
     return parser.parse_known_args(argv)
@@ -285,7 +301,7 @@ def main(argv=None) -> int:
     if args.one:
         with tempfile.TemporaryDirectory() as tmp:
             record = run_one(args.one[0], float(args.one[1]), args.max_it, Path(tmp) / "out",
-                             petsc_argv, quads=args.quads)
+                             petsc_argv, quads=args.quads, levels=args.levels)
         from mpi4py import MPI
 
         if MPI.COMM_WORLD.rank == 0:
