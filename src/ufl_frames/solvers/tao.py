@@ -61,6 +61,7 @@ from ufl_frames.solvers.hessian import (  # noqa: E402
     DEFAULT_DAMPING,
     RELEASE_RATIO,
     GaussNewtonModel,
+    ReducedFactorPC,
 )
 
 #: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
@@ -89,10 +90,12 @@ NEWTON_KSP_PREFIX = {"nls": "tao_nls_", "ntr": "tao_ntr_", "bnls": "tao_bnk_",
                      "bntr": "tao_bnk_"}
 
 
-def newton_pc_options(tao_type: str, comm) -> dict:
-    """The default preconditioner of the Newton systems of ``tao_type``: a sparse Cholesky
-    factorisation of the model's assembled part (MUMPS where PETSc has it, which runs in
-    parallel; PETSc's own in serial; GAMG as the last resort).
+def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
+    """The default preconditioner of the Newton systems of ``tao_type``: the sparse
+    Cholesky factorisation of the model's assembled part in reduced tangent coordinates
+    (:class:`~ufl_frames.solvers.hessian.ReducedFactorPC`: 3 unknowns per vertex instead
+    of 5); with ``reduced=False``, of the 5N × 5N pre-matrix itself (MUMPS where PETSc has
+    it, which runs in parallel; PETSc's own in serial; GAMG as the last resort).
 
     Why direct: the Gauss–Newton matrix JᵀJ has a large near-kernel (integrable fields are
     far from unique), which no smoother-based multigrid sees; with GAMG the Krylov
@@ -103,6 +106,9 @@ def newton_pc_options(tao_type: str, comm) -> dict:
     prefix = NEWTON_KSP_PREFIX.get(tao_type)
     if prefix is None:
         return {}
+    if reduced:
+        return {f"{prefix}pc_type": "python",
+                f"{prefix}pc_python_type": "ufl_frames.solvers.hessian.ReducedFactorPC"}
     if PETSc.Sys.hasExternalPackage("mumps"):
         return {f"{prefix}pc_type": "cholesky", f"{prefix}pc_factor_mat_solver_type": "mumps"}
     if comm.size == 1:
@@ -423,6 +429,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
         tao.setMonitor(guarded(record))
         tao.setFromOptions()
         if model is not None:
+            _attach_reduced(tao.getKSP(), model)
             tao.getKSP().setMonitor(guarded(count_linear))
             model.on_error = keep  # the shell's products, guarded too
         original_tests = _continue_tests(tao, resume) if resume is not None else None
@@ -443,6 +450,15 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
     iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
     return SolveResult(history=history, converged_reason=reason, iterations=iterations,
                        wall_time_s=wall)
+
+
+def _attach_reduced(ksp, model: GaussNewtonModel) -> None:
+    """Give the Newton KSP's :class:`ReducedFactorPC` (the default PC) its model; any other
+    PC the user chose acts on the model's assembled pre-matrix as it is."""
+    pc = ksp.getPC()
+    if pc.getType() == PETSc.PC.Type.PYTHON and isinstance(pc.getPythonContext(),
+                                                           ReducedFactorPC):
+        pc.getPythonContext().attach(model, ksp.getOptionsPrefix() or "")
 
 
 def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
