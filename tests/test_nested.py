@@ -4,6 +4,8 @@ that goes from a coarse mesh to a fine one (:meth:`FrameField.nested`, ``--level
 Serial and under MPI (``mpirun -n 2 python -m pytest -m "not serial"``).
 """
 
+from pathlib import Path
+
 import dolfinx.fem
 import numpy as np
 import pytest
@@ -101,8 +103,8 @@ def test_nested_fine_level_is_cheaper_than_a_cold_start(piano_nested):
 
 
 @pytest.mark.parametrize("arguments, words", [
-    ({"levels": 0}, "levels must be an integer"),
-    ({"levels": 2.5}, "levels must be an integer"),
+    ({"levels": 0}, "levels must be .auto. or an integer"),
+    ({"levels": 2.5}, "levels must be .auto. or an integer"),
     ({"levels": 2, "conformal": True}, "--conformal"),
 ])
 def test_run_solve_refuses_bad_levels(arguments, words, tmp_path):
@@ -115,3 +117,66 @@ def test_run_solve_refuses_levels_on_a_msh(tmp_path):
     with pytest.raises(cli.InputError, match="not a .msh"):
         cli.run_solve(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
                       quiet=True, comm=COMM)
+
+
+def test_nested_run_interrupted_on_the_fine_mesh_resumes_to_the_same_result(tmp_path,
+                                                                              monkeypatch):
+    """``--levels 2 --resume``: interrupted during the fine mesh's solve, the run leaves
+    the fine mesh's checkpoint; resumed, it runs the coarse mesh again and ends as the
+    uninterrupted run did (same iterations, H to 1e-10)."""
+    import json
+    import signal
+
+    from ufl_frames import interrupts
+
+    root = Path(COMM.bcast(str(tmp_path), root=0))
+    args = ["solve", "piano", "--mesh-size", "0.1", "--levels", "2", "-q"]
+    assert cli.main([*args, "--out", str(root / "full")]) == 0
+    reference = json.loads((root / "full" / "summary.json").read_text())
+    assert reference["iterations"] > 4
+
+    real, seen, on_fine = interrupts.pending, [], []
+    transferred = FrameField.transferred
+
+    def to_fine(self, domain):
+        on_fine.append(True)
+        return transferred(self, domain)
+
+    def pending(comm):  # a SIGINT at the fine mesh's 4th iterate (no real signal)
+        if on_fine:
+            seen.append(1)
+            if len(seen) >= 4:
+                return signal.SIGINT
+        return real(comm)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(interrupts, "pending", pending)
+        patch.setattr(FrameField, "transferred", to_fine)
+        assert cli.main([*args, "--out", str(root / "o")]) == interrupts.INTERRUPTED_STATUS
+    assert (root / "o" / "checkpoint" / "state.npz").is_file()
+    assert cli.main([*args, "--resume", str(root / "o")]) == 0
+    resumed = json.loads((root / "o" / "summary.json").read_text())
+    assert resumed["resumed_from_iteration"] >= 2
+    assert resumed["iterations"] == reference["iterations"]
+    assert resumed["H_final"] == pytest.approx(reference["H_final"], rel=1e-10)
+    assert [e["iterations"] for e in resumed["levels"]] == \
+        [e["iterations"] for e in reference["levels"]]
+
+
+def test_auto_levels_keeps_the_coarsest_mesh_above_the_threshold():
+    """A quarter of the triangles per level, the coarsest at NESTED_COARSEST or more."""
+    assert cli.auto_levels(1887) == 1
+    assert cli.auto_levels(4 * cli.NESTED_COARSEST - 1) == 1
+    assert cli.auto_levels(4 * cli.NESTED_COARSEST) == 2
+    assert cli.auto_levels(29597) == 3
+    assert cli.auto_levels(10**12) == cli.MAX_LEVELS
+
+
+def test_run_solve_auto_levels_nests_a_fine_mesh(tmp_path):
+    """The default (--levels auto) on 7.5e3 triangles: two meshes, 1887 then 7539 triangles,
+    and the result converged on the fine one."""
+    out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
+    summary = cli.run_solve("piano", mesh_size=0.025, out=out, quiet=True, comm=COMM)
+    assert [e["triangles"] for e in summary["levels"]] == [1887, summary["num_cells"]]
+    assert summary["converged"]
+    assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]

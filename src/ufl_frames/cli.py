@@ -111,6 +111,16 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _levels(text: str):
+    """``--levels``: 'auto' or a whole number from 1 to MAX_LEVELS."""
+    if text == "auto":
+        return text
+    value = _positive_int(text)
+    if value > MAX_LEVELS:
+        raise argparse.ArgumentTypeError(f"must be 'auto' or at most {MAX_LEVELS}, got {text!r}")
+    return value
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -193,11 +203,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "
                        "triangles)")
-    solve.add_argument("--levels", type=_positive_int, default=1, metavar="L",
+    solve.add_argument("--levels", type=_levels, default="auto", metavar="L",
                        help="nested iteration over L meshes: MBO and a solve on the mesh of "
                        "size 2^(L-1) times the requested one, then each finer mesh from the "
-                       "coarser solution (default 1: one mesh; not with a .msh, --resume or "
-                       "--conformal)")
+                       "coarser solution (default 'auto': as many as keep the coarsest mesh "
+                       "at 1500 triangles or more, one mesh for a .msh or --conformal)")
     solve.add_argument("-q", "--quiet", action="store_true", help="no progress output")
 
     commands.add_parser("info", help="print the versions of the libraries in use",
@@ -365,6 +375,9 @@ def default_output_folder(geometry: str) -> Path:
 
 #: At most this many levels of nested iteration (each halves the mesh size).
 MAX_LEVELS = 8
+#: ``--levels auto`` keeps the coarsest mesh at this many triangles or more: below, MBO's
+#: singularities and the coarse solution are too far from the fine mesh's to help.
+NESTED_COARSEST = 1500
 
 
 def _check_parameters(mesh_size, max_it) -> None:
@@ -375,16 +388,27 @@ def _check_parameters(mesh_size, max_it) -> None:
         raise InputError(f"max-it must be a positive integer at most {MAX_INT}, got {max_it!r}")
 
 
-def _check_levels(levels, geometry: str, resume, conformal: bool) -> None:
+def auto_levels(num_cells: int) -> int:
+    """The levels of ``--levels auto`` for a finest mesh of ``num_cells`` triangles: as
+    many halvings of the mesh size as keep the coarsest mesh at :data:`NESTED_COARSEST`
+    triangles or more (a quarter of the triangles per level), at most :data:`MAX_LEVELS`."""
+    levels = 1
+    while levels < MAX_LEVELS and num_cells / 4.0**levels >= NESTED_COARSEST:
+        levels += 1
+    return levels
+
+
+def _check_levels(levels, geometry: str, conformal: bool) -> None:
     """What nested iteration needs: a whole number of levels, a geometry Gmsh meshes."""
+    if levels == "auto":
+        return
     if isinstance(levels, bool) or not isinstance(levels, int) or not 0 < levels <= MAX_LEVELS:
-        raise InputError(f"levels must be an integer from 1 to {MAX_LEVELS}, got {levels!r}")
+        raise InputError(f"levels must be 'auto' or an integer from 1 to {MAX_LEVELS}, "
+                         f"got {levels!r}")
     if levels == 1:
         return
     if str(geometry).lower().endswith(".msh"):
         raise InputError("--levels needs a geometry Gmsh can mesh at several sizes, not a .msh")
-    if resume is not None:
-        raise InputError("--levels and --resume cannot be combined (a checkpoint is of one mesh)")
     if conformal:
         raise InputError("--levels and --conformal cannot be combined (no TAO solve to nest)")
 
@@ -408,7 +432,7 @@ def run_solve(
     quads: bool = False,
     conformal: bool = False,
     resume=None,
-    levels: int = 1,
+    levels: int | str = "auto",
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
     :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
@@ -420,7 +444,9 @@ def run_solve(
     the database, an existing non-empty ``out``) on every rank, before anything is
     computed or written, when the input is unusable; ``levels`` > 1: nested iteration
     (:meth:`~ufl_frames.pipeline.FrameField.nested`) over meshes of size factors
-    2^(levels-1) … 1 of ``size_factor``; :class:`RunError` when a solve or
+    2^(levels-1) … 1 of ``size_factor`` ('auto': :func:`auto_levels` of the requested
+    mesh, one level for a ``.msh`` or ``conformal``; a coarse mesh that fails or loses a
+    hole ends the coarsening there); :class:`RunError` when a solve or
     writing the results fails on every rank alike (a PETSc error, a full disk); other
     exceptions are bugs and keep their type. ``out`` is written whole or not at all
     (:class:`ufl_frames.io.OutputFolder`). PETSc options in the database
@@ -445,7 +471,7 @@ def run_solve(
         out = resume
     out = default_output_folder(geometry) if out is None else Path(out)
     _check_parameters(mesh_size, max_it)
-    _check_levels(levels, geometry, resume, conformal)
+    _check_levels(levels, geometry, conformal)
     problem = petsc_option_problem(user_options)
     if problem is not None:
         raise InputError(problem)
@@ -473,14 +499,28 @@ def run_solve(
         raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
     except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
+    automatic = levels == "auto"
+    if automatic:
+        can_coarsen = not (conformal or geometry.lower().endswith(".msh"))
+        levels = auto_levels(domain.num_cells) if can_coarsen else 1
     coarse = []  # nested iteration: the coarser meshes, coarsest first
     for k in range(levels - 1, 0, -1):
         say(f"meshing level {levels - 1 - k} (size factor {2**k:g}) ...")
         try:
-            coarse.append(geometry_module.build(comm, geometry, mesh_size,
-                                                size_factor * 2**k, **limit))
+            level = geometry_module.build(comm, geometry, mesh_size, size_factor * 2**k,
+                                          **limit)
+            if level.euler_characteristic != domain.euler_characteristic:
+                raise geometry_module.GeometryError(
+                    f"at size factor {2**k:g} the mesh has Euler characteristic "
+                    f"{level.euler_characteristic}, not {domain.euler_characteristic} "
+                    "(a hole or a thin part is lost)")
         except geometry_module.GeometryError as e:
-            raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
+            if not automatic:
+                raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
+            say(f"  note: no coarser level: {e}")
+            coarse = []  # the coarser levels are worse still: start from the finer ones
+            continue
+        coarse.append(level)
     interrupts.set_stage("the MBO initial field")
     interrupts.checkpoint(comm)
     for note in domain.notes:
@@ -559,15 +599,27 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
         say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
             + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else ""))
 
-    def keep(state):
-        """Save ``state`` every CHECKPOINT_EVERY steps and when interrupted, then stop
-        if interrupted (at each TAO iterate, before the monitor prints)."""
+    def keep(state, V=None):
+        """Save ``state`` (of the field on ``V``, default the field's) every
+        CHECKPOINT_EVERY steps and when interrupted, then stop if interrupted (at each TAO
+        iterate, before the monitor prints)."""
         signum = interrupts.pending(comm)
         if state.iterations > 0 and (signum or
                                      state.iterations % checkpoints.CHECKPOINT_EVERY == 0):
-            store.save(state, field.q.function_space)
+            store.save(state, field.q.function_space if V is None else V)
             interrupts.note_checkpoint(out)
         interrupts.checkpoint(comm, signum)
+
+    def restore(V):
+        """The checkpoint resumed from, on the space ``V`` (None without one)."""
+        if saved is None:
+            return None
+        try:
+            state = checkpoints.restore(saved, V, comm)
+        except checkpoints.CheckpointError as e:
+            raise InputError(str(e)) from e
+        say(f"resuming from the checkpoint at iteration {state.iterations} ...")
+        return state
 
     with options_scope():  # the solvers' defaults end with the run
         if not coarse:  # nested iteration runs MBO on its coarsest mesh only
@@ -589,8 +641,19 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             interrupts.set_stage(f"the TAO solve ({tao_type}), nested")
             interrupts.checkpoint(comm)
 
-            def interruptible(state):  # no checkpoints: --resume is refused with --levels
-                interrupts.checkpoint(comm, interrupts.pending(comm))
+            finest_space = []
+
+            def restore_finest(V):
+                nonlocal state
+                finest_space.append(V)
+                state = restore(V)
+                return state
+
+            def keep_finest(state, finest):  # checkpoints of the finest mesh only
+                if finest:
+                    keep(state, finest_space[-1])
+                else:
+                    interrupts.checkpoint(comm, interrupts.pending(comm))
 
             def level_done(entry):
                 say(f"mesh {entry['level'] + 1}/{len(coarse) + 1}: {entry['triangles']} "
@@ -604,17 +667,12 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                     [*coarse, domain], isotropic=isotropic, max_aspect=max_aspect,
                     pin_singularities=not free_singularities, max_it=max_it,
                     monitor=tao_monitor, mbo_monitor=mbo_monitor, level_monitor=level_done,
-                    checkpoint=interruptible)
+                    checkpoint=keep_finest, restore=restore_finest)
             result = field.result
         else:
             interrupts.set_stage(f"the TAO solve ({tao_type})")
             interrupts.checkpoint(comm)
-            if saved is not None:
-                try:
-                    state = checkpoints.restore(saved, field.q.function_space, comm)
-                except checkpoints.CheckpointError as e:
-                    raise InputError(str(e)) from e
-                say(f"resuming from the checkpoint at iteration {state.iterations} ...")
+            state = restore(field.q.function_space)
             say(f"solving ({kind}, TAO {tao_type}) ...")
             with _failures(f"the TAO solve ({tao_type})"):
                 result = field.solve(pin_singularities=not free_singularities, max_it=max_it,

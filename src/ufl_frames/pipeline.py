@@ -112,7 +112,8 @@ class FrameField:
     def nested(cls, domains, isotropic: bool = False,
                max_aspect: float | None = DEFAULT_MAX_ASPECT, pin_singularities: bool = True,
                max_it: int | None = None, monitor=None, mbo_monitor=None,
-               level_monitor=None, options_prefix: str = "", checkpoint=None) -> "FrameField":
+               level_monitor=None, options_prefix: str = "", checkpoint=None,
+               restore=None) -> "FrameField":
         """Nested iteration: MBO and a solve on the coarsest of ``domains`` (meshes of one
         shape, coarse to fine), then on each finer one a solve from the coarser solution
         (:meth:`transferred`); returns the field on the finest (collective).
@@ -122,10 +123,16 @@ class FrameField:
         :func:`ufl_frames.solvers.solve`). With ``pin_singularities`` each level holds the
         singular triangles of its own start, so the singularities are MBO's, carried
         down. ``monitor`` gets every level's history entries, ``mbo_monitor`` the MBO
-        levels, ``checkpoint`` every level's states (as for :meth:`solve`; an exception
-        from it ends the whole run), ``level_monitor(entry)`` a summary per level
-        ({"level", "triangles", "iterations", "H", "reason", "seconds"}); the finest
-        field's :attr:`levels` lists those summaries.
+        levels, ``level_monitor(entry)`` a summary per level ({"level", "triangles",
+        "iterations", "H", "reason", "seconds"}); the finest field's :attr:`levels`
+        lists those summaries.
+
+        ``checkpoint(state, finest)`` receives every level's states (as for :meth:`solve`,
+        ``finest`` telling whether they are of the last mesh; an exception from it ends
+        the run). ``restore(V)``, if given, returns the :class:`~ufl_frames.solvers.SolverState`
+        (or None) to resume the finest level from, V being its space: the coarser levels
+        run again (they are deterministic and cheap), so the finest one starts from the
+        same transferred field, pins and tolerance as the run that saved the state.
         """
         import time
 
@@ -135,14 +142,21 @@ class FrameField:
         field, reference, levels = None, None, []
         for k, domain in enumerate(domains):
             start = time.perf_counter()
+            finest = k == len(domains) - 1
             if field is None:
                 field = cls.initial(domain, isotropic=isotropic, max_aspect=max_aspect,
                                     monitor=mbo_monitor)
             else:
                 field = field.transferred(domain)
+            resume = restore(field.q.function_space) if finest and restore else None
+
+            def keep(state, finest=finest):
+                checkpoint(state, finest)
+
             result = field.solve(pin_singularities=pin_singularities, max_it=max_it,
                                  monitor=monitor, options_prefix=options_prefix,
-                                 checkpoint=checkpoint, reference_gradient=reference)
+                                 checkpoint=None if checkpoint is None else keep,
+                                 resume=resume, reference_gradient=reference)
             if reference is None:
                 reference = result.history[0]["gnorm"]
             levels.append({"level": k, "triangles": domain.num_cells,
