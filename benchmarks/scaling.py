@@ -57,12 +57,13 @@ REFERENCE_H_005 = 1.1225e-3
 
 
 def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
-            quads: bool = False, levels: int = 1) -> dict:
+            quads: bool = False, levels: int | str = "auto") -> dict:
     """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0).
 
-    With ``levels`` > 1, nested iteration (:meth:`FrameField.nested`): ``mesh`` meshes
-    every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``), and the
-    Newton and Krylov counts are the finest level's (every level's in ``levels``)."""
+    With ``levels`` > 1 (or 'auto', the CLI's default rule :func:`ufl_frames.cli.auto_levels`,
+    when that gives more than one), nested iteration (:meth:`FrameField.nested`): ``mesh``
+    meshes every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``),
+    and the Newton and Krylov counts are the finest level's (every level's in ``levels``)."""
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc([sys.argv[0], *petsc_argv])
@@ -71,6 +72,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     from mpi4py import MPI
 
     from ufl_frames import geometry
+    from ufl_frames.cli import auto_levels
     from ufl_frames.pipeline import FrameField
 
     comm = MPI.COMM_WORLD
@@ -87,16 +89,19 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
             print(f"  {name}: {stages[name]:.2f} s", file=sys.stderr, flush=True)
         return value
 
-    if levels > 1:
-        domains = stage("mesh", lambda: [geometry.build(comm, shape, h, 2.0**k)
-                                         for k in range(levels - 1, -1, -1)])
-        domain = domains[-1]
+    def meshes():
+        fine = geometry.build(comm, shape, h)
+        count = auto_levels(fine.num_cells) if levels == "auto" else int(levels)
+        return [geometry.build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)] + [fine]
+
+    domains = stage("mesh", meshes)
+    domain = domains[-1]
+    if len(domains) > 1:
         stages["mbo"] = cpu["mbo"] = 0.0
         field = stage("solve", lambda: FrameField.nested(domains, isotropic=kind == "iso",
                                                          max_it=max_it))
         result = field.result
     else:
-        domain = stage("mesh", lambda: geometry.build(comm, shape, h))
         field = stage("mbo", lambda: FrameField.initial(domain, isotropic=kind == "iso"))
         result = stage("solve", lambda: field.solve(max_it=max_it))
     if comm.rank == 0:
@@ -289,8 +294,9 @@ def parse_args(argv=None):
     parser.add_argument("--json", type=Path, default=None, help="write all records here")
     parser.add_argument("--one", nargs=2, metavar=("CASE", "H"), help=argparse.SUPPRESS)
     parser.add_argument("--record", type=Path, help=argparse.SUPPRESS)
-    parser.add_argument("--levels", type=int, default=1, metavar="L",
-                        help="nested iteration over L meshes (FrameField.nested; default 1)")
+    parser.add_argument("--levels", default="auto", metavar="L",
+                        help="nested iteration over L meshes (FrameField.nested), or 'auto' "
+                        "(the CLI's default rule; the default)")
     parser.add_argument("--quads", action="store_true",
                         help="also make the quad mesh (default quad size) and time its stages")
     return parser.parse_known_args(argv)
