@@ -305,12 +305,18 @@ def parse_args(argv=None):
 def main(argv=None) -> int:
     args, petsc_argv = parse_args(argv)
     if args.one:
-        with tempfile.TemporaryDirectory() as tmp:
-            record = run_one(args.one[0], float(args.one[1]), args.max_it, Path(tmp) / "out",
-                             petsc_argv, quads=args.quads, levels=args.levels)
+        from ufl_frames.bootstrap import init_petsc
+
+        init_petsc([sys.argv[0], *petsc_argv])  # before mpi4py (see ufl_frames.bootstrap)
         from mpi4py import MPI
 
-        if MPI.COMM_WORLD.rank == 0:
+        comm = MPI.COMM_WORLD
+        with tempfile.TemporaryDirectory() as own:  # rank 0's folder on every rank
+            tmp = comm.bcast(own, root=0)
+            record = run_one(args.one[0], float(args.one[1]), args.max_it, Path(tmp) / "out",
+                             petsc_argv, quads=args.quads, levels=args.levels)
+            comm.Barrier()  # every rank done with the folder before rank 0 removes it
+        if comm.rank == 0:
             args.record.write_text(json.dumps(record))
         return 0
     if args.sizes:

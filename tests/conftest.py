@@ -205,16 +205,26 @@ def pytest_configure(config):
 
 
 def pytest_sessionfinish(session, exitstatus):
-    """Remove the per-rank temporary folders of a passing MPI run (kept when it fails)."""
-    run = getattr(session.config, "_ufl_frames_mpi_run", None)
+    """Under MPI: whether every rank passed (for :func:`pytest_unconfigure`)."""
     MPI = _mpi()
     if MPI is None or not hasattr(session.config, "_ufl_frames_mpi_run"):
         return
     worst = MPI.COMM_WORLD.allreduce(int(exitstatus), op=MPI.MAX)
-    if run is not None and worst == 0:
-        import shutil
+    session.config._ufl_frames_mpi_passed = worst == 0
 
-        shutil.rmtree(run, ignore_errors=True)
+
+def pytest_unconfigure(config):
+    """Remove the per-rank temporary folders of a passing MPI run (kept when it fails):
+    each rank its own, after pytest's own clean-up of it; then rank 0 the run's folder."""
+    if not getattr(config, "_ufl_frames_mpi_passed", False):
+        return
+    import shutil
+
+    MPI = _mpi()
+    shutil.rmtree(config.option.basetemp, ignore_errors=True)
+    MPI.COMM_WORLD.Barrier()
+    if config._ufl_frames_mpi_run is not None:
+        shutil.rmtree(config._ufl_frames_mpi_run, ignore_errors=True)
 
 
 def pytest_collection_modifyitems(config, items):

@@ -419,3 +419,11 @@ def test_describe_many_singularities_counts_them():
     assert "\n" not in text
     assert io.describe_singularities(sings[:6], limit=6).count(" at (") == 6
     assert " at (" not in io.describe_singularities(sings[:7], limit=6)
+
+
+@pytest.mark.skipif(COMM.size == 1, reason="needs ranks given different folders")
+def test_write_field_folders_differing_by_rank_fail_on_every_rank(tmp_path):
+    """Each rank its own folder (a caller's mistake: VTK pieces land apart): one error on
+    every rank, not rank 0 alone with the others left waiting in a collective."""
+    with pytest.raises(OSError, match="same folder"):
+        io.write_field(tmp_path, twisted_field(square_mesh(4)))

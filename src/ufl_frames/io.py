@@ -279,9 +279,20 @@ def write_field(directory, q: fem.Function, stem: str = "frames") -> list[Path]:
     with dolfinx.io.VTKFile(comm, pvd, "w") as vtk:
         vtk.write_function(functions, 0.0)
     comm.Barrier()
-    # The piece names are DOLFINx's: read them from the files rather than guess them.
-    written = [pvd, *_vtk_references(pvd)] if comm.rank == 0 else None
-    return paths + comm.bcast(written, root=0)
+    # The piece names are DOLFINx's: read them from the files rather than guess them. On
+    # rank 0, and what it finds (or why it cannot, e.g. ranks given different folders)
+    # reaches every rank: an error on rank 0 alone would leave the others in the bcast.
+    written = None
+    if comm.rank == 0:
+        try:
+            written = [pvd, *_vtk_references(pvd)]
+        except (OSError, ET.ParseError) as e:
+            written = e
+    written = comm.bcast(written, root=0)
+    if isinstance(written, Exception):
+        raise OSError(f"the VTK files just written in {str(directory)!r} cannot be read "
+                      f"back ({written}); all ranks must be given the same folder") from written
+    return paths + written
 
 
 # --- reading VTK back -------------------------------------------------------------------

@@ -106,8 +106,9 @@ class GaussNewtonModel:
     faster there (annulus 14/21 iterations at h = 0.1/0.05 against 17/29).
 
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
-    is the preconditioning matrix, so ``-tao_nls_pc_type`` / ``-tao_ntr_pc_type``
-    (gamg, hypre, lu, ...) act on it.
+    is the preconditioning matrix. By default :class:`ReducedFactorPC` inverts it in
+    reduced tangent coordinates (:meth:`reduced_operator`); ``-tao_nls_pc_type`` /
+    ``-tao_ntr_pc_type`` (cholesky, gamg, hypre, lu, ...) act on the 5N matrix itself.
 
     TAO's Hessian perturbation (``nls``, ``bnls``: ``MatShift`` by ``pert`` after each
     Hessian evaluation) shifts both: the shell (:meth:`shift`, so the shell is B + pert·I)

@@ -32,7 +32,8 @@ on round-off. TAO types:
   the model of :class:`GaussNewtonModel` — the exact Riemannian Hessian for isotropic
   frames, Gauss–Newton for non-isotropic ones (``-frames_hessian``); the Newton systems
   are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``: by default a
-  sparse Cholesky factorisation, see :func:`newton_pc_options`); the Gauss–Newton
+  sparse Cholesky factorisation in reduced tangent coordinates, 3 unknowns per vertex,
+  see :func:`newton_pc_options`); the Gauss–Newton
   damping adapts to the line search (``-frames_gn_adapt``) and the aspect bound's active
   set is held until releasing it pays (``-frames_active_release η``, 0 to turn off);
 * ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
