@@ -89,3 +89,37 @@ def test_reduced_pc_is_the_default():
 def test_reduced_pc_alone_refuses_to_run():
     with pytest.raises(RuntimeError, match="Newton model"):
         ReducedFactorPC().setUp(None)
+
+
+@pytest.mark.parametrize("isotropic", [False, True])
+def test_lean_model_applies_the_same_newton_matrix(piano, isotropic):
+    """The lean model (no 5N pre-matrix: nls/ntr with the reduced PC) applies the same
+    Newton matrix B as the full one, before and after a shift."""
+    from ufl_frames import solvers
+
+    field = FrameField.initial(piano, isotropic=isotropic)
+    problem = solvers.frame_problem(field.q, isotropic=isotropic,
+                                    max_aspect=field.max_aspect,
+                                    constraints=field.constraints)
+    x = problem.q.x.petsc_vec.duplicate()
+    problem.write_x(x)
+    kwargs = {"exact": isotropic, "adapt": not isotropic}
+    with GaussNewtonModel(problem, x, **kwargs) as full, \
+            GaussNewtonModel(problem, x, lean=True, **kwargs) as lean:
+        assert lean.assembled is None and lean.mu == pytest.approx(full.mu, rel=1e-12)
+        rng = np.random.default_rng(3 + COMM.rank)
+        v, a, b = x.duplicate(), x.duplicate(), x.duplicate()
+        try:
+            for shift in (0.0, 0.25):
+                if shift:
+                    full.shift(None, shift)
+                    lean.shift(None, shift)
+                    lean.reduced_operator()  # the PC's view: R holds the shift now
+                v.getArray()[:] = rng.standard_normal(v.getLocalSize())
+                full.shell.mult(v, a)
+                lean.shell.mult(v, b)
+                b.axpy(-1.0, a)
+                assert b.norm() <= 1e-10 * a.norm()
+        finally:
+            for vec in (v, a, b, x):
+                vec.destroy()

@@ -109,6 +109,9 @@ class GaussNewtonModel:
     is the preconditioning matrix. By default :class:`ReducedFactorPC` inverts it in
     reduced tangent coordinates (:meth:`reduced_operator`); ``-tao_nls_pc_type`` /
     ``-tao_ntr_pc_type`` (cholesky, gamg, hypre, lu, ...) act on the 5N matrix itself.
+    With ``lean`` (``nls`` and ``ntr`` with the reduced PC) the 5N matrix is not made at
+    all: the shell applies B from the reduced matrix (T R Tᵀ + μ (I − T Tᵀ)) and is TAO's
+    pre-matrix too, which saves two 5N × 5N matrices and their PtAP per step.
 
     TAO's Hessian perturbation (``nls``, ``bnls``: ``MatShift`` by ``pert`` after each
     Hessian evaluation) shifts both: the shell (:meth:`shift`, so the shell is B + pert·I)
@@ -122,13 +125,14 @@ class GaussNewtonModel:
     #: The PETSc objects the model owns (destroyed by :meth:`free`).
     _OWNED = ("shell", "assembled", "unshifted", "gauss_newton", "sobolev", "unscale", "xhat",
               "work", "tangent", "normal", "curvature", "basis_matrix", "reduced_matrix",
-              "reduced_curvature", "absent")
+              "reduced_curvature", "absent", "lean_t", "lean_u", "lean_w")
 
     def __init__(self, problem: FrameProblem, template: PETSc.Vec,
                  damping: float = DEFAULT_DAMPING,
                  damping_min: float = 1e-3, exact: bool = False, adapt: bool = False,
-                 release: float = RELEASE_RATIO):
+                 release: float = RELEASE_RATIO, lean: bool = False):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
+        self.lean = lean
         self.release, self.active = release, None
         self.adapt, self.adaptation = adapt, 1.0  # the factor a of λ (see ADAPT_FACTOR)
         self._resumed_step = None  # the step length the first update adapts to (resume)
@@ -172,7 +176,8 @@ class GaussNewtonModel:
         # pre-matrix that TAO's MatShift does not reach (all made by the first _assemble)
         # the model at the current q (TAO calls update again before its first product)
         self.assembled = self._assemble(None, gnorm=None, evaluation=problem.evaluation())
-        self.shell = PETSc.Mat().createPython(self.assembled.getSizes(), comm=template.comm)
+        sizes = (template.getSizes(), template.getSizes())
+        self.shell = PETSc.Mat().createPython(sizes, comm=template.comm)
         self.shell.setPythonContext(self)
         self.shell.setUp()
 
@@ -200,8 +205,10 @@ class GaussNewtonModel:
         if not problem.constraints.isotropic:  # frames held on the aspect bound (no e_d)
             self.active = np.linalg.norm(basis[:, :, 1], axis=1) == 0
         self._basis = basis[:n]  # for reduced_operator (the tangent basis of this model)
-        blocks = np.einsum("nik,njk->nij", basis[:n], basis[:n])
         index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
+        if self.lean:
+            return self._assemble_lean(basis, evaluation)
+        blocks = np.einsum("nik,njk->nij", basis[:n], basis[:n])
         self.tangent = _block_diagonal(blocks, index_map, comm, self.tangent)
         identity = np.eye(odeco.NUM_COEFFICIENTS)
         self.normal = _block_diagonal(identity - blocks, index_map, comm, self.normal)
@@ -238,6 +245,26 @@ class GaussNewtonModel:
         self.reduced_shift = None  # reduced_operator() is out of date
         return result
 
+    def _assemble_lean(self, basis, evaluation: Evaluation) -> None:
+        """The lean model: only the reduced matrix (no 5N × 5N pre-matrix, no copy of it);
+        μ = trace(Tᵀ G T) / (tangent directions), as the 5N path's trace(P G P) / trace(P).
+        Returns None: the shell is TAO's pre-matrix too."""
+        problem, manifold = self.problem, self.problem.manifold
+        if self.exact:
+            self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
+                                                               evaluation.gradient_x)
+        self.mu = None  # set by _build_reduced from the trace
+        self._build_reduced()
+        problem.write_x(self.xhat)
+        if self.exact:
+            self.sphere = manifold.sphere_curvature(evaluation.energy)
+        self.xhat.normalize()
+        self.shift_value = 0.0
+        self.reduced_shift = 0.0
+        if self.shell is not None:  # the PC's operator changed: PCSetUp runs again
+            self.shell.stateIncrease()
+        return None
+
     def reduced_operator(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """The model's assembled part in reduced tangent coordinates: (T, R) with T the
         rectangular block-diagonal tangent basis (5 rows and c = 3 columns per vertex, 2
@@ -257,6 +284,15 @@ class GaussNewtonModel:
             self.reduced_matrix.shift(self.shift_value - self.reduced_shift)
             self.reduced_shift = self.shift_value
             return self.basis_matrix, self.reduced_matrix
+        self._build_reduced()
+        if self.shift_value:
+            self.reduced_matrix.shift(self.shift_value)
+        self.reduced_shift = self.shift_value
+        return self.basis_matrix, self.reduced_matrix
+
+    def _build_reduced(self) -> None:
+        """T and R = Tᵀ G T (+ the reduced curvature) + μ E from the last assembly, no
+        shift; μ from the trace of Tᵀ G T where it is not known yet (lean model)."""
         problem = self.problem
         columns = [0, 2] if problem.constraints.isotropic else [0, 1, 2]
         basis = self._basis[:, :, columns]
@@ -267,6 +303,15 @@ class GaussNewtonModel:
             self.reduced_matrix = self.gauss_newton.PtAP(self.basis_matrix)
         else:
             self.gauss_newton.PtAP(self.basis_matrix, result=self.reduced_matrix)
+        missing = np.linalg.norm(basis, axis=1) == 0  # (n, c)
+        if self.mu is None:
+            trace = self.reduced_matrix.getDiagonal()
+            try:
+                total = trace.sum()
+            finally:
+                trace.destroy()
+            count = comm.allreduce(int(np.count_nonzero(~missing)), op=MPI.SUM)
+            self.mu = total / max(count, 1)
         if self.exact:  # the variety's curvature, in the same coordinates (c × c blocks)
             reduced = np.einsum("nai,nab,nbj->nij", basis, self._curvature_blocks, basis)
             self.reduced_curvature = _block_diagonal(reduced, index_map, comm,
@@ -275,13 +320,8 @@ class GaussNewtonModel:
                                      structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if self.absent is None:
             self.absent = self.reduced_matrix.createVecRight()
-        missing = np.linalg.norm(basis, axis=1) == 0  # (n, c)
         self.absent.getArray()[:] = np.where(missing, self.mu, 0.0).ravel()
         self.reduced_matrix.setDiagonal(self.absent, addv=PETSc.InsertMode.ADD_VALUES)
-        if self.shift_value:
-            self.reduced_matrix.shift(self.shift_value)
-        self.reduced_shift = self.shift_value
-        return self.basis_matrix, self.reduced_matrix
 
     def resume(self, adaptation: float, gnorm0: float | None, active, step: float) -> None:
         """Go on from an earlier solve's state (:class:`ufl_frames.solvers.SolverState`):
@@ -357,12 +397,32 @@ class GaussNewtonModel:
         """y = B v + shift·v; the unshifted assembled part, whatever TAO did to the pre-matrix."""
         along = self.xhat.dot(v)
         self.work.waxpy(-along, self.xhat, v)
-        self.unshifted.mult(self.work, y)
+        if self.lean:
+            self._reduced_mult(self.work, y)
+        else:
+            self.unshifted.mult(self.work, y)
         if self.sphere:
             y.axpy(-self.sphere, self.work)
         y.axpy(self.mu * along - self.xhat.dot(y), self.xhat)
         if self.shift_value:
             y.axpy(self.shift_value, v)
+
+    def _reduced_mult(self, w, y):
+        """y = T (R − s I) Tᵀ w + μ (w − T Tᵀ w), s the shift R holds: the assembled part
+        (P G P + μ (I − P), + curvature) from the reduced matrix (lean model)."""
+        T, R = self.basis_matrix, self.reduced_matrix
+        if self.lean_t is None:
+            self.lean_t, self.lean_u, self.lean_w = (R.createVecRight(), R.createVecRight(),
+                                                     T.createVecLeft())
+        t, u, tangent = self.lean_t, self.lean_u, self.lean_w
+        T.multTranspose(w, t)
+        R.mult(t, u)
+        if self.reduced_shift:
+            u.axpy(-self.reduced_shift, t)
+        T.mult(t, tangent)
+        T.mult(u, y)
+        y.axpy(self.mu, w)
+        y.axpy(-self.mu, tangent)
 
     def shift(self, mat, a):
         """MatShift on the shell: B + a·I from now on (until the next assembly)."""

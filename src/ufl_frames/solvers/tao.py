@@ -409,12 +409,19 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
         model = None
         if hessian is not None:
             opts = PETSc.Options(options_prefix)
+            prefix = NEWTON_KSP_PREFIX.get(tao_type)
+            # nls and ntr with the reduced PC need no 5N pre-matrix (the bounded types
+            # take sub-matrices of it: they keep it).
+            lean = (tao_type in ("nls", "ntr")
+                    and opts.getString(f"{prefix}pc_type", "") == "python"
+                    and opts.getString(f"{prefix}pc_python_type", "").endswith(
+                        "ReducedFactorPC"))
             model = owned.enter_context(GaussNewtonModel(
                 problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
                 adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
                 release=opts.getReal("frames_active_release", RELEASE_RATIO),
-                exact=hessian == "exact"))
+                exact=hessian == "exact", lean=lean))
             if resume is not None and resume.adaptation is not None:
                 model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
                              resume.step)
@@ -425,7 +432,8 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
         tao.setObjectiveGradient(guarded(objective_gradient), g)
         tao.setObjective(guarded(objective))  # line-search trials need no gradient
         if model is not None:
-            tao.setHessian(guarded(model.update), model.shell, model.assembled)
+            pre = model.shell if model.lean else model.assembled
+            tao.setHessian(guarded(model.update), model.shell, pre)
         tao.setUpdate(guarded(update))
         tao.setMonitor(guarded(record))
         tao.setFromOptions()
