@@ -402,6 +402,29 @@ def test_plot_convergence_writes_png(shared_tmp, H0):
     assert path.read_bytes()[:8] == PNG_MAGIC
 
 
+def test_plot_convergence_of_nested_levels(shared_tmp, monkeypatch):
+    """Nested iteration: the meshes one after another on one axis (cumulative iterations),
+    one line per mesh with its label; a malformed level history is refused."""
+    levels = [(f"{n} triangles", [{"it": k, "H": 0.1 / n * 0.5**k, "E": 1.0 + k}
+                                  for k in range(m)]) for n, m in ((100, 5), (400, 3))]
+    drawn = {}
+    real = io._draw_convergence
+
+    def spy(path, history, title, parts=None):
+        drawn["parts"] = parts
+        real(path, history, title, parts)
+
+    monkeypatch.setattr(io, "_draw_convergence", spy)
+    path = shared_tmp / "nested.png"
+    io.plot_convergence(path, levels[-1][1], title="nested", levels=levels)
+    COMM.Barrier()
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    if COMM.rank == 0:
+        assert [label for label, _ in drawn["parts"]] == ["100 triangles", "400 triangles"]
+    with pytest.raises(ValueError):
+        io.plot_convergence(path, levels[-1][1], levels=[("bad", [{"it": 0}])])
+
+
 def test_describe_singularities():
     assert io.describe_singularities([]) == "none"
     text = io.describe_singularities(

@@ -760,31 +760,55 @@ def _frames_figure(layout, points, rows, spacing, boundary, area, singularities,
 
 
 def plot_convergence(
-    path, history: list[dict], title: str | None = None, comm: MPI.Comm = MPI.COMM_WORLD
+    path, history: list[dict], title: str | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
+    levels: list[tuple[str, list[dict]]] | None = None,
 ) -> None:
     """H(q) (log scale) and E(q) against the iteration (note Fig. 2), written by rank 0.
 
     ``history`` is :attr:`ufl_frames.solvers.SolveResult.history` (entries with
-    ``"it"``, ``"H"``, ``"E"``). Collective over ``comm``.
+    ``"it"``, ``"H"``, ``"E"``). With ``levels`` (nested iteration: ``(label, history)``
+    per mesh, coarse to fine, the last being ``history``) the meshes follow one another
+    on one iteration axis, one colour each. Collective over ``comm``.
     """
     _check_history(history)
-    _on_root(comm, lambda: _draw_convergence(path, history, title))
+    for _, part in levels or ():
+        _check_history(part)
+    _on_root(comm, lambda: _draw_convergence(path, history, title, levels))
 
 
-def _draw_convergence(path, history, title):
+_LEVEL_COLOURS = ("#1f77b4", "#2ca02c", "#9467bd", "#d62728", "#8c564b", "#17becf",
+                  "#7f7f7f", "#bcbd22")
+
+
+def _draw_convergence(path, history, title, levels=None):
     plt = _pyplot()
-    it = np.array([h["it"] for h in history], dtype=float)
-    H = np.array([h["H"] for h in history], dtype=float)
-    E = np.array([h["E"] for h in history], dtype=float)
-    style = {"marker": "o", "markersize": 3} if len(history) <= 60 else {}
+    parts = levels if levels and len(levels) > 1 else [(None, history)]
+    it = np.concatenate([np.array([h["it"] for h in part], dtype=float)
+                         + sum(len(p) - 1 for _, p in parts[:k]) for k, (_, part)
+                         in enumerate(parts)])
+    H = np.array([h["H"] for _, part in parts for h in part], dtype=float)
+    E = np.array([h["E"] for _, part in parts for h in part], dtype=float)
+    style = {"marker": "o", "markersize": 3} if len(it) <= 60 else {}
 
     fig, (ax_h, ax_e) = plt.subplots(1, 2, figsize=(9.0, 3.6), layout="constrained")
-    ax_h.plot(it, H, color="#1f77b4", lw=1.5, **style)
+    if len(parts) == 1:
+        ax_h.plot(it, H, color="#1f77b4", lw=1.5, **style)
+    else:  # one colour per mesh, and where each starts
+        start = 0
+        for k, (label, part) in enumerate(parts):
+            colour = _LEVEL_COLOURS[k % len(_LEVEL_COLOURS)]
+            span = slice(start, start + len(part))
+            for ax, values in ((ax_h, H), (ax_e, E)):
+                ax.plot(it[span], values[span], color=colour, lw=1.5, label=label, **style)
+                ax.axvline(it[start], color="0.7", lw=0.8, ls="--")
+            start += len(part)
+        ax_h.legend(fontsize="small", title="mesh", title_fontsize="small")
     if np.all(H > 0):
         ax_h.set_yscale("log")
     ax_h.set_ylabel(r"$H(q) = \frac{1}{2}\int_\Omega |[u,v]|^2\,dx$")
     ax_h.set_title("integrability energy")
-    ax_e.plot(it, E, color="#ff7f0e", lw=1.5, **style)
+    if len(parts) == 1:
+        ax_e.plot(it, E, color="#ff7f0e", lw=1.5, **style)
     ax_e.set_ylabel(r"$E(q) = \frac{1}{2}\int_\Omega |\nabla q|^2\,dx$")
     ax_e.set_title("Dirichlet energy")
     for ax in (ax_h, ax_e):

@@ -72,6 +72,8 @@ class FrameField:
     #: Per level of :meth:`nested` (coarse to fine): triangles, iterations, H, reason,
     #: seconds; None for a one-mesh solve.
     levels: list[dict] | None = None
+    #: Per level of :meth:`nested`: the solve's history (for ``convergence.png``).
+    level_histories: list[list[dict]] | None = field(default=None, repr=False)
 
     @classmethod
     def initial(
@@ -139,7 +141,7 @@ class FrameField:
         domains = list(domains)
         if not domains:
             raise ValueError("nested iteration needs at least one domain")
-        field, reference, levels = None, None, []
+        field, reference, levels, histories = None, None, [], []
         for k, domain in enumerate(domains):
             start = time.perf_counter()
             finest = k == len(domains) - 1
@@ -159,13 +161,14 @@ class FrameField:
                                  resume=resume, reference_gradient=reference)
             if reference is None:
                 reference = result.history[0]["gnorm"]
+            histories.append(result.history)
             levels.append({"level": k, "triangles": domain.num_cells,
                            "iterations": result.iterations, "H": result.H_final,
                            "reason": result.converged_reason,
                            "seconds": time.perf_counter() - start})
             if level_monitor is not None:
                 level_monitor(levels[-1])
-        field.levels = levels
+        field.levels, field.level_histories = levels, histories
         return field
 
     def conformal(self, options_prefix: str = "conformal_") -> "FrameField":
@@ -394,10 +397,16 @@ class FrameField:
         names.append("frames.png")
         if self.result is not None:
             method = f", TAO {tao_type}" if tao_type else ""
+            levels, iterations = None, f"{self.result.iterations} iterations"
+            if self.level_histories and len(self.level_histories) > 1:
+                levels = [(f"{entry['triangles']} triangles", part) for entry, part
+                          in zip(self.levels, self.level_histories, strict=True)]
+                iterations = (f"{' + '.join(str(e['iterations']) for e in self.levels)} "
+                              f"iterations on {len(self.levels)} meshes")
             io.plot_convergence(
                 out / "convergence.png", self.result.history,
-                title=f"{label}, {kind}: {self.result.iterations} iterations{method}",
-                comm=self.domain.comm,
+                title=f"{label}, {kind}: {iterations}{method}",
+                comm=self.domain.comm, levels=levels,
             )
             names.append("convergence.png")
         return names
