@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import geometry
+from ufl_frames import geometry, solvers
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import GaussNewtonModel, ReducedFactorPC
@@ -23,18 +23,22 @@ def piano():
     return geometry.build(COMM, "piano", mesh_size=0.1)
 
 
-@pytest.mark.parametrize("isotropic", [False, True])
-def test_reduced_pc_inverts_the_pre_matrix(piano, isotropic):
-    """y = PC(r) solves A y = r for the model's assembled pre-matrix A = P G P + μ(I − P)
-    (+ the variety's curvature for the exact isotropic Hessian), also with a shift."""
-    field = FrameField.initial(piano, isotropic=isotropic)
-    from ufl_frames import solvers
-
+def mbo_problem(domain, isotropic):
+    """The frame problem of ``domain``'s MBO field and its iterate x (the caller destroys x)."""
+    field = FrameField.initial(domain, isotropic=isotropic)
     problem = solvers.frame_problem(field.q, isotropic=isotropic,
                                     max_aspect=field.max_aspect,
                                     constraints=field.constraints)
     x = problem.q.x.petsc_vec.duplicate()
     problem.write_x(x)
+    return problem, x
+
+
+@pytest.mark.parametrize("isotropic", [False, True])
+def test_reduced_pc_inverts_the_pre_matrix(piano, isotropic):
+    """y = PC(r) solves A y = r for the model's assembled pre-matrix A = P G P + μ(I − P)
+    (+ the variety's curvature for the exact isotropic Hessian), also with a shift."""
+    problem, x = mbo_problem(piano, isotropic)
     with GaussNewtonModel(problem, x, exact=isotropic, adapt=not isotropic) as model:
         pc = ReducedFactorPC()
         pc.attach(model, "test_reduced_")
@@ -95,14 +99,7 @@ def test_reduced_pc_alone_refuses_to_run():
 def test_lean_model_applies_the_same_newton_matrix(piano, isotropic):
     """The lean model (no 5N pre-matrix: nls/ntr with the reduced PC) applies the same
     Newton matrix B as the full one, before and after a shift."""
-    from ufl_frames import solvers
-
-    field = FrameField.initial(piano, isotropic=isotropic)
-    problem = solvers.frame_problem(field.q, isotropic=isotropic,
-                                    max_aspect=field.max_aspect,
-                                    constraints=field.constraints)
-    x = problem.q.x.petsc_vec.duplicate()
-    problem.write_x(x)
+    problem, x = mbo_problem(piano, isotropic)
     kwargs = {"exact": isotropic, "adapt": not isotropic}
     with GaussNewtonModel(problem, x, **kwargs) as full, \
             GaussNewtonModel(problem, x, lean=True, **kwargs) as lean:
