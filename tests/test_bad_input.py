@@ -171,7 +171,7 @@ def test_run_solve_checks_the_options_database(shared_tmp):
 
 
 def test_write_failure_is_one_line_and_leaves_nothing(shared_tmp, capsys, monkeypatch):
-    def full_disk(path, history, title):
+    def full_disk(path, *args):
         raise OSError(28, "No space left on device", str(path))
 
     monkeypatch.setattr(io, "_draw_convergence", full_disk)
