@@ -205,10 +205,35 @@ class GaussNewtonModel:
         if not problem.constraints.isotropic:  # frames held on the aspect bound (no e_d)
             self.active = np.linalg.norm(basis[:, :, 1], axis=1) == 0
         self._basis = basis[:n]  # for reduced_operator (the tangent basis of this model)
-        index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
+        if self.exact:
+            self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
+                                                               evaluation.gradient_x)
+        if self.lean:  # only the reduced matrix: no 5N × 5N pre-matrix, no copy of it
+            self.mu = None  # from trace(Tᵀ G T), as the 5N path's trace(P G P) / trace(P)
+            self._build_reduced()
+            result = None
+        else:
+            result = self._assemble_full(result, basis[:n])
+        problem.write_x(self.xhat)
+        if self.exact:
+            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
+            self.sphere = manifold.sphere_curvature(evaluation.energy)
+        self.xhat.normalize()
+        self.shift_value = 0.0
         if self.lean:
-            return self._assemble_lean(basis, evaluation)
-        blocks = np.einsum("nik,njk->nij", basis[:n], basis[:n])
+            self.reduced_shift = 0.0  # R is built, unshifted
+            if self.shell is not None:  # the PC's operator changed: PCSetUp runs again
+                self.shell.stateIncrease()
+        else:
+            self.reduced_shift = None  # reduced_operator() is out of date
+        return result
+
+    def _assemble_full(self, result, basis) -> PETSc.Mat:
+        """The 5N × 5N pre-matrix P G P + μ (I − P) (+ curvature) into ``result`` (None:
+        a new one), and its unshifted copy for the shell's product."""
+        G, problem = self.gauss_newton, self.problem
+        index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
+        blocks = np.einsum("nik,njk->nij", basis, basis)
         self.tangent = _block_diagonal(blocks, index_map, comm, self.tangent)
         identity = np.eye(odeco.NUM_COEFFICIENTS)
         self.normal = _block_diagonal(identity - blocks, index_map, comm, self.normal)
@@ -224,46 +249,17 @@ class GaussNewtonModel:
             dofs.destroy()
         result.axpy(self.mu, self.normal, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if self.exact:
-            self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
-                                                               evaluation.gradient_x)
             self.curvature = _block_diagonal(self._curvature_blocks, index_map, comm,
                                              self.curvature)
             result.axpy(1.0, self.curvature,
                         structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-        problem.write_x(self.xhat)
-        if self.exact:
-            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
-            self.sphere = manifold.sphere_curvature(evaluation.energy)
-        self.xhat.normalize()
         # TAO shifts the pre-matrix (``result``) in place; the shell's product must not see
         # that shift, it adds its own (``shift_value``) exactly once.
         if self.unshifted is None:
             self.unshifted = result.duplicate(copy=True)
         else:
             result.copy(self.unshifted, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        self.shift_value = 0.0
-        self.reduced_shift = None  # reduced_operator() is out of date
         return result
-
-    def _assemble_lean(self, basis, evaluation: Evaluation) -> None:
-        """The lean model: only the reduced matrix (no 5N × 5N pre-matrix, no copy of it);
-        μ = trace(Tᵀ G T) / (tangent directions), as the 5N path's trace(P G P) / trace(P).
-        Returns None: the shell is TAO's pre-matrix too."""
-        problem, manifold = self.problem, self.problem.manifold
-        if self.exact:
-            self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
-                                                               evaluation.gradient_x)
-        self.mu = None  # set by _build_reduced from the trace
-        self._build_reduced()
-        problem.write_x(self.xhat)
-        if self.exact:
-            self.sphere = manifold.sphere_curvature(evaluation.energy)
-        self.xhat.normalize()
-        self.shift_value = 0.0
-        self.reduced_shift = 0.0
-        if self.shell is not None:  # the PC's operator changed: PCSetUp runs again
-            self.shell.stateIncrease()
-        return None
 
     def reduced_operator(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """The model's assembled part in reduced tangent coordinates: (T, R) with T the
