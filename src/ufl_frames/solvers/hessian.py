@@ -28,7 +28,8 @@ __all__ = ["DEFAULT_DAMPING", "GaussNewtonModel", "ReducedFactorPC"]
 DEFAULT_DAMPING = 1.0
 #: The damping adapts to the steps (``-frames_gn_adapt``, on by default): after a step
 #: the line search accepted whole, the factor a ∈ [:data:`ADAPT_FLOOR`, 1] of λ = λ₀ a …
-#: shrinks by :data:`ADAPT_FACTOR`, after a shortened one it grows back. A fixed λ₀ = 1
+#: shrinks by :data:`ADAPT_FACTOR`, after a shortened one it grows back (unless the step
+#: put frames on the aspect bound: :meth:`GaussNewtonModel._reached_bound`). A fixed λ₀ = 1
 #: damped the non-isotropic piano into a linear crawl (87 / 91 / 194 Newton iterations at
 #: h = 0.1 / 0.05 / 0.025, with exact linear solves too); a fixed λ₀ = 1e-3 takes 26 / 47
 #: there, but sends the isotropic annulus from MBO to another, 20x higher minimum and
@@ -130,8 +131,9 @@ class GaussNewtonModel:
     def __init__(self, problem: FrameProblem, template: PETSc.Vec,
                  damping: float = DEFAULT_DAMPING,
                  damping_min: float = 1e-3, exact: bool = False, adapt: bool = False,
-                 release: float = RELEASE_RATIO, lean: bool = False):
+                 release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
+        self.bound_steps = bound_steps  # see _reached_bound
         self.lean = lean
         self.release, self.active = release, None
         self.adapt, self.adaptation = adapt, 1.0  # the factor a of λ (see ADAPT_FACTOR)
@@ -334,12 +336,35 @@ class GaussNewtonModel:
             step = tao.getSolutionStatus()[4]  # the last line search's step length
             if self._resumed_step is not None:
                 step, self._resumed_step = self._resumed_step, None
-            if step >= 1.0 - 1e-12:
+            if step >= 1.0 - 1e-12 or (self.bound_steps and self._reached_bound()):
                 self.adaptation = max(ADAPT_FLOOR, self.adaptation / ADAPT_FACTOR)
             else:
                 self.adaptation = min(1.0, self.adaptation * ADAPT_FACTOR)
         self._hold_active_set(tao.getGradient()[0])
         self.assemble(gnorm=tao.getGradient()[0].norm())
+
+    def _reached_bound(self) -> bool:
+        """Whether the last step put frames on the aspect bound that the last Newton step
+        left free (collective): frames on it now, pushed outwards, not active then.
+
+        The retraction clamps such frames onto the bound, so the step taken bends away
+        from the Newton step and the line search shortens it; that is the bound's kink,
+        not a poor model, and growing the damping for it was the wrong answer: on the
+        non-isotropic piano at h = 0.05 / 0.025 / 0.0125 the damping then alternated
+        between a = 1 and 0.1 for most of the solve. Counting such a step as a whole
+        one (with the Armijo line search, :data:`~ufl_frames.solvers.tao.BOUNDED_OPTIONS`)
+        took the Newton steps from 45 / 72 / 122 to 24 / 42 / 67, to the same H.
+        ``-frames_gn_adapt_bound false`` grows the damping after every shortened step.
+        """
+        problem = self.problem
+        if self.active is None or problem.constraints.isotropic \
+                or problem.constraints.max_aspect is None:
+            return False
+        basis = problem.manifold.tangent_basis(problem.rows, problem.evaluation().gradient_x)
+        active = np.linalg.norm(basis[:, :, 1], axis=1) == 0
+        n = problem.owned
+        new = bool(np.any(active[:n] & ~self.active[:n]))
+        return problem.constraints.comm.allreduce(new, op=MPI.LOR)
 
     def _hold_active_set(self, g: PETSc.Vec) -> None:
         """The anti-zigzag rule of the aspect bound (``-frames_active_release η``).

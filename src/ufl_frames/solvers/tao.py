@@ -36,6 +36,8 @@ on round-off. TAO types:
   see :func:`newton_pc_options`); the Gauss–Newton
   damping adapts to the line search (``-frames_gn_adapt``) and the aspect bound's active
   set is held until releasing it pays (``-frames_active_release η``, 0 to turn off);
+  with the aspect bound, ``nls`` backtracks (``-tao_ls_type armijo``, see
+  :data:`BOUNDED_OPTIONS`);
 * ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
 * ``bncg`` with ``-tao_bncg_type gd`` (set by default for ``bncg``) and an Armijo line
   search: the note's projected gradient descent. Every option can be given on the command line,
@@ -84,6 +86,17 @@ ENERGY_RTOL = 1e-16
 #: :func:`newton_pc_options`).
 TYPE_OPTIONS = {
     "bncg": {"tao_bncg_type": "gd", "tao_ls_type": "armijo"},
+}
+
+#: Line search of ``nls`` where frames have an aspect bound: backtracking (Armijo) instead
+#: of TAO's default Moré–Thuente search. The retraction bends the search path where it
+#: clamps frames onto the bound; there Moré–Thuente's interpolation settled on steps of
+#: 0.1-0.4 that a sufficient-decrease test takes whole (non-isotropic piano, h = 0.025:
+#: 55 Newton steps instead of 72, same H). Elsewhere (isotropic frames, no bound) the
+#: path is smooth and Moré–Thuente stays: its curvature test still makes progress at
+#: gradients near round-off, where differences of H no longer can.
+BOUNDED_OPTIONS = {
+    "nls": {"tao_ls_type": "armijo"},
 }
 
 #: Options prefix of the Newton KSP inside each Newton TAO type.
@@ -246,7 +259,8 @@ def solve(
     opts = PETSc.Options(options_prefix)
     tao_type = opts.getString("tao_type", (defaults or {}).get("tao_type",
                                                                  DEFAULT_OPTIONS["tao_type"]))
-    options = {**DEFAULT_OPTIONS, **TYPE_OPTIONS.get(tao_type, {}),
+    bounded = BOUNDED_OPTIONS.get(tao_type, {}) if problem.constraints.max_aspect else {}
+    options = {**DEFAULT_OPTIONS, **TYPE_OPTIONS.get(tao_type, {}), **bounded,
                **newton_pc_options(tao_type, problem.constraints.comm), **(defaults or {})}
     if max_it is not None:
         options["tao_max_it"] = max_it
@@ -421,6 +435,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
                 adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
                 release=opts.getReal("frames_active_release", RELEASE_RATIO),
+                bound_steps=opts.getBool("frames_gn_adapt_bound", True),
                 exact=hessian == "exact", lean=lean))
             if resume is not None and resume.adaptation is not None:
                 model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
