@@ -44,7 +44,8 @@ def test_damping_shrinks_after_a_cut_step_that_reached_the_bound(monkeypatch):
 
     def recording(self, tao, x, H, P):
         before, step = self.adaptation, tao.getSolutionStatus()[4]
-        reached = self.gnorm0 is not None and step < 1 - 1e-12 and self._reached_bound()
+        cut = self.gnorm0 is not None and step < 1 - 1e-12
+        reached = cut and self._reached_bound(self._free_basis())
         update(self, tao, x, H, P)
         if reached:
             seen.append((before, self.adaptation))

@@ -134,11 +134,13 @@ class FrameManifold:
 
     def tangent_project(self, rows: np.ndarray, dq: np.ndarray,
                         gradient: np.ndarray | None = None,
-                        held: np.ndarray | None = None) -> np.ndarray:
+                        held: np.ndarray | None = None,
+                        basis: np.ndarray | None = None) -> np.ndarray:
         """Step 2 of note §3: the pointwise tangent part of ``dq`` at ``rows``; the active
         aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)
-        and ``held``."""
-        basis = self.tangent_basis(rows, dq if gradient is None else gradient, held)
+        and ``held``, unless ``basis`` (:meth:`tangent_basis` at ``rows``) is given."""
+        if basis is None:
+            basis = self.tangent_basis(rows, dq if gradient is None else gradient, held)
         return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
 
     def riemannian_gradient(self, rows: np.ndarray, gradient_x: np.ndarray,

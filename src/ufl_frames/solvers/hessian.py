@@ -332,18 +332,31 @@ class GaussNewtonModel:
     def update(self, tao, x, H, P):
         """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
         self.problem.set_from_x(x)
+        free = self._free_basis()
         if self.adapt and self.gnorm0 is not None:  # after the first Newton step
             step = tao.getSolutionStatus()[4]  # the last line search's step length
             if self._resumed_step is not None:
                 step, self._resumed_step = self._resumed_step, None
-            if step >= 1.0 - 1e-12 or (self.bound_steps and self._reached_bound()):
+            if step >= 1.0 - 1e-12 or (self.bound_steps and self._reached_bound(free)):
                 self.adaptation = max(ADAPT_FLOOR, self.adaptation / ADAPT_FACTOR)
             else:
                 self.adaptation = min(1.0, self.adaptation * ADAPT_FACTOR)
-        self._hold_active_set(tao.getGradient()[0])
+        self._hold_active_set(tao.getGradient()[0], free)
         self.assemble(gnorm=tao.getGradient()[0].norm())
 
-    def _reached_bound(self) -> bool:
+    def _free_basis(self) -> np.ndarray | None:
+        """The tangent basis at the current q with the aspect bound's active set decided by
+        the gradient alone (nothing held), which the bound rules compare with the last
+        Newton step's; None where neither rule is on, without a bound or before the first
+        Newton step."""
+        problem = self.problem
+        if (not (self.release or self.bound_steps) or self.active is None
+                or problem.constraints.isotropic
+                or problem.constraints.max_aspect is None):
+            return None
+        return problem.manifold.tangent_basis(problem.rows, problem.evaluation().gradient_x)
+
+    def _reached_bound(self, free: np.ndarray | None) -> bool:
         """Whether the last step put frames on the aspect bound that the last Newton step
         left free (collective): frames on it now, pushed outwards, not active then.
 
@@ -356,17 +369,15 @@ class GaussNewtonModel:
         took the Newton steps from 45 / 72 / 122 to 24 / 42 / 67, to the same H.
         ``-frames_gn_adapt_bound false`` grows the damping after every shortened step.
         """
-        problem = self.problem
-        if self.active is None or problem.constraints.isotropic \
-                or problem.constraints.max_aspect is None:
+        if free is None:
             return False
-        basis = problem.manifold.tangent_basis(problem.rows, problem.evaluation().gradient_x)
-        active = np.linalg.norm(basis[:, :, 1], axis=1) == 0
+        problem = self.problem
+        active = np.linalg.norm(free[:, :, 1], axis=1) == 0
         n = problem.owned
         new = bool(np.any(active[:n] & ~self.active[:n]))
         return problem.constraints.comm.allreduce(new, op=MPI.LOR)
 
-    def _hold_active_set(self, g: PETSc.Vec) -> None:
+    def _hold_active_set(self, g: PETSc.Vec, free: np.ndarray | None) -> None:
         """The anti-zigzag rule of the aspect bound (``-frames_active_release η``).
 
         Frames on the bound that were active at the last Newton step stay held there,
@@ -376,16 +387,15 @@ class GaussNewtonModel:
         the bound flipped in and out at every step (141 vertices, 1212 changes in 99 steps
         on the piano at h = 0.05) and the line search cut the steps. With a held set, TAO's
         gradient ``g`` is recomputed on that face, so that the Newton system, the line
-        search and the stopping test see the same one.
+        search and the stopping test see the same one. ``free``: :meth:`_free_basis`.
         """
         problem = self.problem
         problem.held = None
-        if (not self.release or self.active is None or problem.constraints.isotropic
-                or problem.constraints.max_aspect is None):
+        if not self.release or free is None:
             return
         manifold, rows = problem.manifold, problem.rows
         gradient = problem.evaluation().gradient_x
-        free = manifold.tangent_project(rows, gradient)
+        free = manifold.tangent_project(rows, gradient, basis=free)
         face = manifold.tangent_project(rows, gradient, held=self.active)
         on_face = np.sqrt(manifold.inner(face, face))
         released = np.sqrt(manifold.inner(free - face, free - face))
