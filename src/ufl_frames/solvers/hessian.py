@@ -42,6 +42,16 @@ ADAPT_FLOOR = 1e-3
 RELEASE_RATIO = 1.0
 
 
+def sobolev_form(V: fem.FunctionSpace, area: float) -> ufl.Form:
+    """K + M/A, the H¹ metric of the Newton model's damping in units of the domain (A its
+    area), so that the damping, like JᵀJ, does not depend on the domain's size (K + M, on
+    a domain 6.5e7 wide, was M alone: an L² damping, and Newton stalled at 500 iterations).
+    """
+    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+    scale = fem.Constant(V.mesh, PETSc.ScalarType(1.0 / area))
+    return (ufl.inner(ufl.grad(u), ufl.grad(w)) + scale * ufl.inner(u, w)) * ufl.dx
+
+
 def _block_diagonal(blocks: np.ndarray, index_map, comm, result=None) -> PETSc.Mat:
     """PETSc AIJ matrix with the (n, r, c) ``blocks`` on the owned block diagonal: square
     (block size r = c) or rectangular (r rows and c columns per vertex: a tangent basis).
@@ -124,7 +134,7 @@ class GaussNewtonModel:
     """
 
     #: The PETSc objects the model owns (destroyed by :meth:`free`).
-    _OWNED = ("shell", "assembled", "unshifted", "gauss_newton", "sobolev", "unscale", "xhat",
+    _OWNED = ("shell", "assembled", "unshifted", "gauss_newton", "unscale", "xhat",
               "work", "tangent", "normal", "curvature", "basis_matrix", "reduced_matrix",
               "reduced_curvature", "absent", "lean_t", "lean_u", "lean_w")
 
@@ -149,29 +159,21 @@ class GaussNewtonModel:
 
     def _create(self, template: PETSc.Vec) -> None:
         problem, exact = self.problem, self.exact
+        V = problem.q.function_space
         if exact:
             H = energy.integrability_energy_form(problem.q)
-            V = problem.q.function_space
-            hessian = ufl.derivative(energy.gradient_form(H, problem.q), problem.q,
-                                     ufl.TrialFunction(V))
-            self.form = fem.form(hessian)
+            model = ufl.derivative(energy.gradient_form(H, problem.q), problem.q,
+                                   ufl.TrialFunction(V))
         else:
-            self.form = fem.form(energy.gauss_newton_form(problem.q))
+            model = energy.gauss_newton_form(problem.q)
+        # λ (K + M/A) is part of the form: one assembly per Newton step, no second 5N × 5N
+        # matrix to add (at 1e5 triangles its MatAXPY alone took 5 % of a step).
+        self.damping_weight = fem.Constant(V.mesh, PETSc.ScalarType(0.0))
+        self.form = fem.form(model + self.damping_weight * sobolev_form(V, problem.area))
         self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
         inverse = 1.0 / problem.sqrt_mass[: problem.owned]
         self.unscale.getArray()[:] = np.repeat(inverse, odeco.NUM_COEFFICIENTS)
-        V = problem.q.function_space
-        u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-        # K + M/A (A the area): the H¹ metric in units of the domain, so that the damping,
-        # like JᵀJ, does not depend on the domain's size (K + M, on a domain 6.5e7 wide,
-        # was M alone: an L² damping, and Newton stalled at 500 iterations).
-        area = fem.Constant(V.mesh, PETSc.ScalarType(problem.area))
-        sobolev = fem.form((ufl.inner(ufl.grad(u), ufl.grad(w)) + ufl.inner(u, w) / area)
-                           * ufl.dx)
-        self.sobolev = dolfinx.fem.petsc.assemble_matrix(sobolev)
-        self.sobolev.assemble()
-        self.sobolev.diagonalScale(self.unscale, self.unscale)
         self.xhat, self.work = template.duplicate(), template.duplicate()
         self.mu, self.shift_value, self.lam, self.gnorm0 = 1.0, 0.0, 0.0, None
         # tangent, normal, curvature: block-diagonal, reused; unshifted: copy of the
@@ -188,10 +190,6 @@ class GaussNewtonModel:
         active aspect bounds and gives the curvature terms."""
         problem, G = self.problem, self.gauss_newton
         manifold = problem.manifold
-        G.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(G, self.form)
-        G.assemble()
-        G.diagonalScale(self.unscale, self.unscale)
         if self.gnorm0 is None and gnorm is not None:
             # The first Hessian is at the initial iterate. Its gradient is no reference
             # when the start is already (nearly) stationary: the natural scale then is.
@@ -202,7 +200,11 @@ class GaussNewtonModel:
         ) / problem.q.function_space.dofmap.index_map.size_global
         ratio = 1.0 if gnorm is None else min(1.0, gnorm / self.gnorm0)
         self.lam = self.damping * self.adaptation * max(self.damping_min, ratio) * scale
-        G.axpy(self.lam, self.sobolev, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        self.damping_weight.value = self.lam
+        G.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(G, self.form)
+        G.assemble()
+        G.diagonalScale(self.unscale, self.unscale)
         basis = manifold.tangent_basis(problem.rows, evaluation.gradient_x, held=problem.held)
         if not problem.constraints.isotropic:  # frames held on the aspect bound (no e_d)
             self.active = np.linalg.norm(basis[:, :, 1], axis=1) == 0
