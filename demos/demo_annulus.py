@@ -124,7 +124,10 @@
 # $\nabla^2 H$ (a second `ufl.derivative`) plus the curvature of the constraints — the
 # second fundamental form of the Odeco variety paired with the normal part of
 # $\nabla H$, and $-4H/\rho^2$ from the fixed norm $\rho$ — which makes it Newton's
-# method on $\mathcal M_h$ (`-frames_hessian exact|gauss_newton` to choose).
+# method on $\mathcal M_h$. For non-isotropic frames $\nabla^2 H$ is indefinite far
+# from a minimum: the default there starts with $J^\top J$ and switches to the exact
+# Hessian once $|g| \le 10^{-3} |g_0|$, where Gauss–Newton would converge only linearly
+# (`-frames_hessian hybrid|exact|gauss_newton` to choose).
 #
 # ## The annulus and its integrable fields
 #

@@ -99,13 +99,13 @@ def model_at(problem, exact):
 
 
 def reference(model, A, v):
-    """B v = S (A − σ) S v + μ (x̂·v) x̂ (the class docstring), A the unshifted pre-matrix."""
+    """B v = S A S v + μ (x̂·v) x̂ (the class docstring), A the unshifted pre-matrix (which
+    holds the sphere's curvature −σ I of the exact model)."""
     xhat = model.xhat
     w = v.copy()
     w.axpy(-xhat.dot(v), xhat)
     y = v.duplicate()
     A.mult(w, y)
-    y.axpy(-model.sphere, w)
     y.axpy(model.mu * xhat.dot(v) - xhat.dot(y), xhat)
     w.destroy()
     return y
@@ -214,11 +214,11 @@ def dense(mat, n):
 
 
 def dense_reference(model, A):
-    """S (A − σ I) S + μ x̂x̂ᵀ with A the assembled (unshifted) pre-matrix, in NumPy."""
+    """S A S + μ x̂x̂ᵀ with A the assembled (unshifted) pre-matrix (−σ I included), in NumPy."""
     n = A.getSize()[0]
     s = model.xhat.getArray().copy()
     S = np.eye(n) - np.outer(s, s)
-    return S @ (dense(A, n) - model.sphere * np.eye(n)) @ S + model.mu * np.outer(s, s)
+    return S @ dense(A, n) @ S + model.mu * np.outer(s, s)
 
 
 @pytest.mark.serial

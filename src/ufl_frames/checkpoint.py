@@ -122,7 +122,7 @@ class CheckpointFolder:
                 "history": state.history, "tao_iterations": state.tao_iterations,
                 "tao_gnorm0": state.tao_gnorm0, "wall_time_s": state.wall_time_s,
                 "step": state.step, "adaptation": state.adaptation,
-                "model_gnorm0": state.model_gnorm0,
+                "model_gnorm0": state.model_gnorm0, "exact_hessian": state.exact_hessian,
                 "num_processes": self.comm.size,
             }
             arrays = {"q": q, **{k: v for k, v in flags.items() if v is not None}}
@@ -252,4 +252,5 @@ def restore(meta: dict, V, comm) -> SolverState:
         adaptation=None if meta["adaptation"] is None else float(meta["adaptation"]),
         model_gnorm0=None if meta["model_gnorm0"] is None else float(meta["model_gnorm0"]),
         active=flags("active"), held=flags("held"),
+        exact_hessian=meta.get("exact_hessian"),  # absent in checkpoints before the hybrid
     )

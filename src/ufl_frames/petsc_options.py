@@ -27,12 +27,12 @@ TAO_TYPES = (
     "bncg", "cg", "bmrm", "nm",  # conjugate gradient, bundle, Nelder–Mead
 )
 #: Values of ``-frames_hessian`` (the Newton model of ``solvers.hessian``).
-HESSIANS = ("exact", "gauss_newton")
+HESSIANS = ("hybrid", "exact", "gauss_newton")
 #: Options naming a PETSc type, by suffix: ``-mbo_ksp_type``, ``-tao_nls_pc_type``...
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 _POSITIVE_INTS = ("tao_max_it",)
-_NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "tao_gatol", "tao_grtol",
-                       "tao_gttol")
+_NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
+                       "tao_gatol", "tao_grtol", "tao_gttol")
 _REALS = ("tao_fmin",)
 
 

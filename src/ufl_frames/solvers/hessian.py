@@ -22,7 +22,7 @@ from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.problem import Evaluation, FrameProblem  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
 
-__all__ = ["DEFAULT_DAMPING", "GaussNewtonModel", "ReducedFactorPC"]
+__all__ = ["DEFAULT_DAMPING", "HYBRID_SWITCH", "GaussNewtonModel", "ReducedFactorPC"]
 
 #: Default λ₀ of the Levenberg–Marquardt damping (``-frames_gn_damping``).
 DEFAULT_DAMPING = 1.0
@@ -37,6 +37,10 @@ DEFAULT_DAMPING = 1.0
 #: the last ones do not.
 ADAPT_FACTOR = 10.0
 ADAPT_FLOOR = 1e-3
+#: τ of the hybrid model (``-frames_hessian hybrid``, the default for non-isotropic frames;
+#: ``-frames_hessian_switch τ``): Gauss–Newton until |g| ≤ τ |g₀|, the exact Riemannian
+#: Hessian from there on, see :meth:`GaussNewtonModel._switch`.
+HYBRID_SWITCH = 1e-3
 #: η of the aspect bound's release rule (``-frames_active_release``; 0: off), see
 #: :meth:`GaussNewtonModel._hold_active_set`.
 RELEASE_RATIO = 1.0
@@ -112,9 +116,12 @@ class GaussNewtonModel:
     At a critical point this is the Riemannian Hessian (tested against second
     differences of H∘R to 1e-7): Newton then converges quadratically even where the
     residual is large — the pinned isotropic piano (H ≈ 0.18) takes 10 iterations at
-    h = 0.05 against 58 with Gauss–Newton. For non-isotropic frames Gauss–Newton stays
-    the default: ∇²H is indefinite along their many free directions, and it was no
-    faster there (annulus 14/21 iterations at h = 0.1/0.05 against 17/29).
+    h = 0.05 against 58 with Gauss–Newton. For non-isotropic frames ∇²H is indefinite
+    along their many free directions far from a minimum, and it was no faster from the
+    start (annulus 14/21 iterations at h = 0.1/0.05 against 17/29; nested piano at 3e4
+    triangles 61/131/310 per level against 25/38/52). Their default is the hybrid
+    (``switch`` = τ, ``-frames_hessian hybrid``): Gauss–Newton, then the exact Hessian
+    once |g| ≤ τ |g₀| (:meth:`_switch`), which ends Gauss–Newton's linear tail.
 
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix. By default :class:`ReducedFactorPC` inverts it in
@@ -141,8 +148,10 @@ class GaussNewtonModel:
     def __init__(self, problem: FrameProblem, template: PETSc.Vec,
                  damping: float = DEFAULT_DAMPING,
                  damping_min: float = 1e-3, exact: bool = False, adapt: bool = False,
-                 release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True):
+                 release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True,
+                 switch: float | None = None):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
+        self.switch = None if exact else switch  # see _switch
         self.bound_steps = bound_steps  # see _reached_bound
         self.lean = lean
         self.release, self.active = release, None
@@ -157,19 +166,23 @@ class GaussNewtonModel:
             self.free()  # what was created before the error (collective, as the creation was)
             raise
 
-    def _create(self, template: PETSc.Vec) -> None:
-        problem, exact = self.problem, self.exact
-        V = problem.q.function_space
+    def _model_form(self, exact: bool) -> fem.Form:
+        """The compiled form of the model's matrix: ∇²H (``exact``) or JᵀJ, plus the damping
+        λ (K + M/A). λ is part of the form (a Constant): one assembly per Newton step, no
+        second 5N × 5N matrix to add (at 1e5 triangles its MatAXPY took 5 % of a step)."""
+        q = self.problem.q
+        V = q.function_space
         if exact:
-            H = energy.integrability_energy_form(problem.q)
-            model = ufl.derivative(energy.gradient_form(H, problem.q), problem.q,
-                                   ufl.TrialFunction(V))
+            H = energy.integrability_energy_form(q)
+            model = ufl.derivative(energy.gradient_form(H, q), q, ufl.TrialFunction(V))
         else:
-            model = energy.gauss_newton_form(problem.q)
-        # λ (K + M/A) is part of the form: one assembly per Newton step, no second 5N × 5N
-        # matrix to add (at 1e5 triangles its MatAXPY alone took 5 % of a step).
-        self.damping_weight = fem.Constant(V.mesh, PETSc.ScalarType(0.0))
-        self.form = fem.form(model + self.damping_weight * sobolev_form(V, problem.area))
+            model = energy.gauss_newton_form(q)
+        return fem.form(model + self.damping_weight * sobolev_form(V, self.problem.area))
+
+    def _create(self, template: PETSc.Vec) -> None:
+        problem = self.problem
+        self.damping_weight = fem.Constant(problem.q.function_space.mesh, PETSc.ScalarType(0.0))
+        self.form = self._model_form(self.exact)
         self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
         inverse = 1.0 / problem.sqrt_mass[: problem.owned]
@@ -212,6 +225,9 @@ class GaussNewtonModel:
         if self.exact:
             self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
                                                                evaluation.gradient_x)
+        if self.exact:
+            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
+            self.sphere = manifold.sphere_curvature(evaluation.energy)
         if self.lean:  # only the reduced matrix: no 5N × 5N pre-matrix, no copy of it
             self.mu = None  # from trace(Tᵀ G T), as the 5N path's trace(P G P) / trace(P)
             self._build_reduced()
@@ -219,9 +235,6 @@ class GaussNewtonModel:
         else:
             result = self._assemble_full(result, basis[:n])
         problem.write_x(self.xhat)
-        if self.exact:
-            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
-            self.sphere = manifold.sphere_curvature(evaluation.energy)
         self.xhat.normalize()
         self.shift_value = 0.0
         if self.lean:
@@ -233,8 +246,8 @@ class GaussNewtonModel:
         return result
 
     def _assemble_full(self, result, basis) -> PETSc.Mat:
-        """The 5N × 5N pre-matrix P G P + μ (I − P) (+ curvature) into ``result`` (None:
-        a new one), and its unshifted copy for the shell's product."""
+        """The 5N × 5N pre-matrix P G P + μ (I − P) (+ curvature − σ I) into ``result``
+        (None: a new one), and its unshifted copy for the shell's product."""
         G, problem = self.gauss_newton, self.problem
         index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
         blocks = np.einsum("nik,njk->nij", basis, basis)
@@ -257,6 +270,7 @@ class GaussNewtonModel:
                                              self.curvature)
             result.axpy(1.0, self.curvature,
                         structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            result.shift(-self.sphere)  # the sphere's curvature, in the preconditioner too
         # TAO shifts the pre-matrix (``result``) in place; the shell's product must not see
         # that shift, it adds its own (``shift_value``) exactly once.
         if self.unshifted is None:
@@ -268,12 +282,13 @@ class GaussNewtonModel:
     def reduced_operator(self) -> tuple[PETSc.Mat, PETSc.Mat]:
         """The model's assembled part in reduced tangent coordinates: (T, R) with T the
         rectangular block-diagonal tangent basis (5 rows and c = 3 columns per vertex, 2
-        for isotropic frames) and R = Tᵀ G T + μ E + s I, G the damped Gauss–Newton matrix,
-        E the identity on the columns that are absent at a vertex (fixed orientation,
-        aspect bound; so that R is regular whatever the active set), s TAO's shift.
+        for isotropic frames) and R = Tᵀ G T + μ E + (s − σ) I, G the damped Gauss–Newton
+        matrix, E the identity on the columns that are absent at a vertex (fixed
+        orientation, aspect bound; so that R is regular whatever the active set), s TAO's
+        shift, σ the sphere's curvature of the exact model (0 for Gauss–Newton).
 
-        The pre-matrix P G P + μ (I − P) of the model (P = T Tᵀ) then has the inverse
-        T R⁻¹ Tᵀ + (I − T Tᵀ)/(μ + s): :class:`ReducedFactorPC` applies it with one
+        The pre-matrix P G P + μ (I − P) − σ I of the model (P = T Tᵀ) then has the inverse
+        T R⁻¹ Tᵀ + (I − T Tᵀ)/(μ − σ + s): :class:`ReducedFactorPC` applies it with one
         factorisation of R, c/5 of the unknowns of the pre-matrix (for c = 3 about a
         fifth of the factorisation's flops). Rebuilt after each assembly, on demand;
         the matrices are the model's (reused, same pattern: one symbolic factorisation).
@@ -320,16 +335,41 @@ class GaussNewtonModel:
                                      structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if self.absent is None:
             self.absent = self.reduced_matrix.createVecRight()
-        self.absent.getArray()[:] = np.where(missing, self.mu, 0.0).ravel()
+        # −σ, the sphere's curvature (exact model): in R, the preconditioner is the model's
+        # tangent block itself, and a Krylov solve takes 2 iterations instead of 5-8
+        self.absent.getArray()[:] = (np.where(missing, self.mu, 0.0) - self.sphere).ravel()
         self.reduced_matrix.setDiagonal(self.absent, addv=PETSc.InsertMode.ADD_VALUES)
 
-    def resume(self, adaptation: float, gnorm0: float | None, active, step: float) -> None:
+    def resume(self, adaptation: float, gnorm0: float | None, active, step: float,
+               exact: bool | None = None) -> None:
         """Go on from an earlier solve's state (:class:`ufl_frames.solvers.SolverState`):
         its damping factor and reference gradient, the active set of its last assembly,
-        and the length of its last step (which a new TAO does not report)."""
+        the length of its last step (which a new TAO does not report) and, for the hybrid
+        model, whether it had switched to the exact Hessian."""
         self.adaptation, self.gnorm0 = adaptation, gnorm0
         self.active = None if active is None else np.asarray(active, dtype=bool).copy()
         self._resumed_step = step
+        if exact and self.switch is not None and not self.exact:
+            self._use_exact()
+
+    def _switch(self, gnorm: float) -> None:
+        """The hybrid model (``switch`` = τ): from the first Newton step with |g| ≤ τ |g₀|
+        on, the exact Riemannian Hessian instead of Gauss–Newton, for the rest of the solve.
+
+        Far from a minimum ∇²H of non-isotropic frames is indefinite along their many free
+        directions, and Gauss–Newton is the better model. Near one, H is not 0 (a residual
+        of the discretisation, H ≈ 1.4e-4 on the piano at 3e4 triangles), the terms JᵀJ
+        leaves out are not small against its near-kernel, and Gauss–Newton converges
+        linearly: with the active set fixed, |g| fell by 8 % per step. The exact Hessian
+        there converges quadratically (the last step overshoots the tolerance by orders).
+        """
+        if self.switch is None or self.exact or self.gnorm0 is None:
+            return
+        if gnorm <= self.switch * self.gnorm0:
+            self._use_exact()
+
+    def _use_exact(self) -> None:
+        self.exact, self.form = True, self._model_form(True)
 
     def update(self, tao, x, H, P):
         """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
@@ -344,7 +384,9 @@ class GaussNewtonModel:
             else:
                 self.adaptation = min(1.0, self.adaptation * ADAPT_FACTOR)
         self._hold_active_set(tao.getGradient()[0], free)
-        self.assemble(gnorm=tao.getGradient()[0].norm())
+        gnorm = tao.getGradient()[0].norm()
+        self._switch(gnorm)
+        self.assemble(gnorm=gnorm)
 
     def _free_basis(self) -> np.ndarray | None:
         """The tangent basis at the current q with the aspect bound's active set decided by
@@ -434,15 +476,13 @@ class GaussNewtonModel:
             self._reduced_mult(self.work, y)
         else:
             self.unshifted.mult(self.work, y)
-        if self.sphere:
-            y.axpy(-self.sphere, self.work)
         y.axpy(self.mu * along - self.xhat.dot(y), self.xhat)
         if self.shift_value:
             y.axpy(self.shift_value, v)
 
     def _reduced_mult(self, w, y):
-        """y = T (R − s I) Tᵀ w + μ (w − T Tᵀ w), s the shift R holds: the assembled part
-        (P G P + μ (I − P), + curvature) from the reduced matrix (lean model)."""
+        """y = T (R − s I) Tᵀ w + (μ − σ) (w − T Tᵀ w), s the shift R holds: the assembled
+        part (P G P + μ (I − P) − σ I, + curvature) from the reduced matrix (lean model)."""
         T, R = self.basis_matrix, self.reduced_matrix
         if self.lean_t is None:
             self.lean_t, self.lean_u, self.lean_w = (R.createVecRight(), R.createVecRight(),
@@ -454,8 +494,8 @@ class GaussNewtonModel:
             u.axpy(-self.reduced_shift, t)
         T.mult(t, tangent)
         T.mult(u, y)
-        y.axpy(self.mu, w)
-        y.axpy(-self.mu, tangent)
+        y.axpy(self.mu - self.sphere, w)
+        y.axpy(self.sphere - self.mu, tangent)
 
     def shift(self, mat, a):
         """MatShift on the shell: B + a·I from now on (until the next assembly)."""
@@ -485,11 +525,11 @@ class ReducedFactorPC:
     context; the default of the Newton TAO types, see
     :func:`ufl_frames.solvers.tao.newton_pc_options`).
 
-    Applies the exact inverse of the model's pre-matrix P G P + μ (I − P) (+ TAO's
-    shift s) without factorising that 5N × 5N matrix: with the tangent basis T of
-    :meth:`GaussNewtonModel.reduced_operator`,
+    Applies the exact inverse of the model's pre-matrix P G P + μ (I − P) (− σ I for the
+    exact model's sphere, + TAO's shift s) without factorising that 5N × 5N matrix: with
+    the tangent basis T of :meth:`GaussNewtonModel.reduced_operator`,
 
-        y = T R⁻¹ Tᵀ r + (r − T Tᵀ r) / (μ + s),     R = Tᵀ G T (+ μ on absent columns, + s),
+        y = T R⁻¹ Tᵀ r + (r − T Tᵀ r) / (μ − σ + s),   R = Tᵀ G T (+ μ on absent columns, + s − σ),
 
     R being 3N × 3N (2N isotropic). So the Krylov iterations are those of the factorised
     pre-matrix (2 per step), for about a fifth of the factorisation's flops and a third
@@ -537,8 +577,9 @@ class ReducedFactorPC:
         self.ksp.solve(t, s)            # s = R⁻¹ t
         T.mult(t, w)                    # w = T Tᵀ r (the tangent part of r)
         T.mult(s, y)                    # y = T R⁻¹ Tᵀ r
-        y.axpy(1.0 / (self.model.mu + self.model.shift_value), r)
-        y.axpy(-1.0 / (self.model.mu + self.model.shift_value), w)
+        normal = self.model.mu - self.model.sphere + self.model.shift_value
+        y.axpy(1.0 / normal, r)
+        y.axpy(-1.0 / normal, w)
 
     def destroy(self, pc):
         if self.ksp is not None:

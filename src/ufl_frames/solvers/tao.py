@@ -30,7 +30,9 @@ on round-off. TAO types:
 
 * ``nls`` (default), ``ntr``, ``bnls``, ``bntr``: Newton line search / trust region on
   the model of :class:`GaussNewtonModel` — the exact Riemannian Hessian for isotropic
-  frames, Gauss–Newton for non-isotropic ones (``-frames_hessian``); the Newton systems
+  frames; for non-isotropic ones Gauss–Newton, then the exact Hessian once the gradient
+  is below τ = 1e-3 of its start (``-frames_hessian hybrid|exact|gauss_newton``,
+  ``-frames_hessian_switch τ``); the Newton systems
   are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``: by default a
   sparse Cholesky factorisation in reduced tangent coordinates, 3 unknowns per vertex,
   see :func:`newton_pc_options`); the Gauss–Newton
@@ -59,9 +61,10 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.problem import FrameProblem  # noqa: E402
-from ufl_frames.petsc_options import TAO_TYPES  # noqa: E402
+from ufl_frames.petsc_options import HESSIANS, TAO_TYPES  # noqa: E402
 from ufl_frames.solvers.hessian import (  # noqa: E402
     DEFAULT_DAMPING,
+    HYBRID_SWITCH,
     RELEASE_RATIO,
     GaussNewtonModel,
     ReducedFactorPC,
@@ -190,7 +193,8 @@ class SolverState:
     TAO's relative test (``-tao_gttol``) divides by; with a Newton model, its damping
     state (``adaptation``, ``model_gnorm0``), the last step length (``step``), the
     aspect bound's active set of the last Newton step (``active``) and the rows it held
-    there (``held``; None: none), owned and ghost rows.
+    there (``held``; None: none), owned and ghost rows, and whether the model was the
+    exact Hessian there (``exact_hessian``: the hybrid model may have switched).
     """
 
     rows: np.ndarray = field(repr=False)
@@ -203,6 +207,7 @@ class SolverState:
     model_gnorm0: float | None = None
     active: np.ndarray | None = field(default=None, repr=False)
     held: np.ndarray | None = field(default=None, repr=False)
+    exact_hessian: bool | None = None
 
     @property
     def iterations(self) -> int:
@@ -331,9 +336,10 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
     if tao_type in SECOND_ORDER_TYPES:
         opts = PETSc.Options(options_prefix)
         hessian = opts.getString("frames_hessian",
-                                 "exact" if problem.constraints.isotropic else "gauss_newton")
-        if hessian not in ("exact", "gauss_newton"):
-            raise ValueError(f"-frames_hessian must be 'exact' or 'gauss_newton', got {hessian!r}")
+                                 "exact" if problem.constraints.isotropic else "hybrid")
+        if hessian not in HESSIANS:
+            raise ValueError(f"-frames_hessian must be one of {', '.join(HESSIANS)}, "
+                             f"got {hessian!r}")
 
     errors = []  # the first exception raised inside a callback, re-raised after TAO stops
 
@@ -397,6 +403,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             wall_time_s=earlier + wall, step=step)
         if model is not None:
             state.adaptation, state.model_gnorm0 = model.adaptation, model.gnorm0
+            state.exact_hessian = model.exact
             state.active = None if model.active is None else model.active.copy()
             state.held = None if problem.held is None else problem.held.copy()
         return state
@@ -436,10 +443,12 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
                 adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
                 release=opts.getReal("frames_active_release", RELEASE_RATIO),
                 bound_steps=opts.getBool("frames_gn_adapt_bound", True),
-                exact=hessian == "exact", lean=lean))
+                exact=hessian == "exact", lean=lean,
+                switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
+                        if hessian == "hybrid" else None)))
             if resume is not None and resume.adaptation is not None:
                 model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
-                             resume.step)
+                             resume.step, exact=resume.exact_hessian)
         tao = PETSc.TAO().create(comm)
         owned.callback(tao.destroy)
         tao.setOptionsPrefix(options_prefix)
