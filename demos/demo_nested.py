@@ -11,7 +11,7 @@
 # # Fine meshes by nested iteration
 #
 # On one mesh the Newton solver starts from the smooth MBO field, which is far from
-# integrable: on the non-isotropic piano it needs 24, 42 and 67 Newton steps at
+# integrable: on the non-isotropic piano it needs 31, 39 and 52 Newton steps at
 # h = 0.05, 0.025 and 0.0125, each step a sparse factorisation. *Nested iteration*
 # starts each fine mesh from the solution of a coarser one instead:
 #
