@@ -3,7 +3,8 @@ r"""Newton models of H on the frame manifold for TAO's second-order methods.
 :class:`GaussNewtonModel` is the Hessian TAO's ``nls``/``ntr``/``bnls``/``bntr`` get:
 the Gauss–Newton (or, with ``exact``, the full) Hessian of the integrability energy,
 made Riemannian with the curvature terms of :class:`~ufl_frames.fem.manifold.FrameManifold`
-and damped in the H¹ metric.
+and damped in the H¹ metric; with ``switch`` (the hybrid model, the default for
+non-isotropic frames) Gauss–Newton first and the exact Hessian near the minimum.
 """
 
 from ufl_frames.bootstrap import init_petsc
