@@ -133,3 +133,16 @@ def test_exact_model_steps_take_two_krylov_iterations(piano, isotropic):
     assert result.converged_reason.startswith("CONVERGED")
     counts = [k for k in result.krylov_iterations if k > 0]
     assert counts and max(counts) <= 3, counts
+
+
+@pytest.mark.parametrize("tao_type", ["nls", "ntr", "bnls", "bntr"])
+def test_every_newton_type_solves_with_the_reduced_pc(tao_type):
+    """Each Newton TAO type converges with the default preconditioner, under an options
+    prefix. ``bntr`` applies the options again inside its solve, which gives the PC a new
+    context; that context finds the model (before: PETSc error 101 at its first step)."""
+    field = FrameField.initial(geometry.build(COMM, "annulus", mesh_size=0.1), isotropic=True)
+    with options_scope([(f"reduced_{tao_type}_tao_type", tao_type)]):
+        result = field.solve(max_it=100, options_prefix=f"reduced_{tao_type}_")
+    assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
+    assert result.iterations > 0
+    assert max(result.krylov_iterations) <= 3

@@ -7,6 +7,8 @@ and damped in the H¹ metric; with ``switch`` (the hybrid model, the default for
 non-isotropic frames) Gauss–Newton first and the exact Hessian near the minimum.
 """
 
+from contextlib import contextmanager
+
 from ufl_frames.bootstrap import init_petsc
 
 init_petsc()
@@ -540,6 +542,22 @@ class ReducedFactorPC:
     cholesky`` (or any other PC) goes back to factorising the pre-matrix itself.
     """
 
+    #: The Newton model of the solve that runs under each KSP options prefix
+    #: (:meth:`solving`). TAO's ``bntr`` applies the options again inside its solve, and
+    #: PETSc then makes a new context of this class for the PC: :meth:`setUp` finds the
+    #: model here (before, that solve failed with PETSc error 101).
+    _solving: dict = {}
+
+    @classmethod
+    @contextmanager
+    def solving(cls, model: GaussNewtonModel, prefix: str):
+        """Within it, a context of this class made for a PC under ``prefix`` uses ``model``."""
+        cls._solving[prefix] = model
+        try:
+            yield
+        finally:
+            cls._solving.pop(prefix, None)
+
     def __init__(self):
         self.model, self.ksp, self.work = None, None, None
 
@@ -562,6 +580,9 @@ class ReducedFactorPC:
         self.ksp.setFromOptions()
 
     def setUp(self, pc):
+        prefix = None if pc is None else pc.getOptionsPrefix() or ""
+        if self.model is None and prefix in self._solving:
+            self.attach(self._solving[prefix], prefix)
         if self.model is None:
             raise RuntimeError("ReducedFactorPC needs the Newton model: use it through "
                                "ufl_frames.solvers.solve")

@@ -463,6 +463,8 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
         tao.setFromOptions()
         if model is not None:
             _attach_reduced(tao.getKSP(), model)
+            owned.enter_context(ReducedFactorPC.solving(model,
+                                                        tao.getKSP().getOptionsPrefix() or ""))
             tao.getKSP().setMonitor(guarded(count_linear))
             model.on_error = keep  # the shell's products, guarded too
         original_tests = _continue_tests(tao, resume) if resume is not None else None
