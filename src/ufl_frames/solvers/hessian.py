@@ -228,7 +228,6 @@ class GaussNewtonModel:
         if self.exact:
             self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
                                                                evaluation.gradient_x)
-        if self.exact:
             # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
             self.sphere = manifold.sphere_curvature(evaluation.energy)
         if self.lean:  # only the reduced matrix: no 5N × 5N pre-matrix, no copy of it
