@@ -385,8 +385,9 @@ class GaussNewtonModel:
                 self.adaptation = max(ADAPT_FLOOR, self.adaptation / ADAPT_FACTOR)
             else:
                 self.adaptation = min(1.0, self.adaptation * ADAPT_FACTOR)
-        self._hold_active_set(tao.getGradient()[0], free)
-        gnorm = tao.getGradient()[0].norm()
+        g = tao.getGradient()[0]
+        self._hold_active_set(g, free)  # may put g on the held face
+        gnorm = g.norm()
         self._switch(gnorm)
         self.assemble(gnorm=gnorm)
 
@@ -542,9 +543,10 @@ class ReducedFactorPC:
     """
 
     #: The Newton model of the solve that runs under each KSP options prefix
-    #: (:meth:`solving`). TAO's ``bntr`` applies the options again inside its solve, and
-    #: PETSc then makes a new context of this class for the PC: :meth:`setUp` finds the
-    #: model here (before, that solve failed with PETSc error 101).
+    #: (:meth:`solving`): :meth:`setUp` of a context without one takes it from here, so
+    #: that it does not matter when PETSc makes the context. TAO's ``bntr`` applies the
+    #: options again inside its solve, which makes a new one (with the model given to the
+    #: first context only, that solve failed with PETSc error 101).
     _solving: dict = {}
 
     @classmethod

@@ -462,7 +462,8 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
         tao.setMonitor(guarded(record))
         tao.setFromOptions()
         if model is not None:
-            _attach_reduced(tao.getKSP(), model)
+            # The Newton KSP's ReducedFactorPC (the default PC), whenever PETSc makes it,
+            # takes this model; any other PC acts on the model's pre-matrix as it is.
             owned.enter_context(ReducedFactorPC.solving(model,
                                                         tao.getKSP().getOptionsPrefix() or ""))
             tao.getKSP().setMonitor(guarded(count_linear))
@@ -485,15 +486,6 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
     iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
     return SolveResult(history=history, converged_reason=reason, iterations=iterations,
                        wall_time_s=wall)
-
-
-def _attach_reduced(ksp, model: GaussNewtonModel) -> None:
-    """Give the Newton KSP's :class:`ReducedFactorPC` (the default PC) its model; any other
-    PC the user chose acts on the model's assembled pre-matrix as it is."""
-    pc = ksp.getPC()
-    if pc.getType() == PETSc.PC.Type.PYTHON and isinstance(pc.getPythonContext(),
-                                                           ReducedFactorPC):
-        pc.getPythonContext().attach(model, ksp.getOptionsPrefix() or "")
 
 
 def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
