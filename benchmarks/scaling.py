@@ -57,13 +57,15 @@ REFERENCE_H_005 = 1.1225e-3
 
 
 def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
-            quads: bool = False, levels: int | str = "auto") -> dict:
+            quads: bool = False, levels: int | str = "auto", nested_meshes: bool = False) -> dict:
     """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0).
 
     With ``levels`` > 1 (or 'auto', the CLI's default rule :func:`ufl_frames.cli.auto_levels`,
     when that gives more than one), nested iteration (:meth:`FrameField.nested`): ``mesh``
     meshes every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``),
-    and the Newton and Krylov counts are the finest level's (every level's in ``levels``)."""
+    and the Newton and Krylov counts are the finest level's (every level's in ``levels``);
+    with ``nested_meshes`` the levels are :func:`ufl_frames.geometry.build_nested`'s (the
+    coarsest split, as ``ufl-frames solve --nested-meshes``) instead of meshed by Gmsh."""
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc([sys.argv[0], *petsc_argv])
@@ -92,6 +94,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     def meshes():
         fine = geometry.build(comm, shape, h)
         count = auto_levels(fine.num_cells) if levels == "auto" else int(levels)
+        if nested_meshes and count > 1:
+            return geometry.build_nested(comm, shape, count, h)
         return [geometry.build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)] + [fine]
 
     domains = stage("mesh", meshes)
@@ -143,6 +147,7 @@ def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
     command = [sys.executable, str(Path(__file__).resolve()), "--one", case, repr(h),
                "--max-it", str(args.max_it), "--record", str(partial),
                *(["--quads"] if args.quads else []), "--levels", str(args.levels),
+               *(["--nested-meshes"] if args.nested_meshes else []),
                *petsc_argv]
     if ranks > 1:
         mpirun = Path(sys.executable).with_name("mpirun")
@@ -297,6 +302,9 @@ def parse_args(argv=None):
     parser.add_argument("--levels", default="auto", metavar="L",
                         help="nested iteration over L meshes (FrameField.nested), or 'auto' "
                         "(the CLI's default rule; the default)")
+    parser.add_argument("--nested-meshes", action="store_true",
+                        help="levels made by splitting the coarsest (ufl-frames solve "
+                        "--nested-meshes) instead of each meshed by Gmsh")
     parser.add_argument("--quads", action="store_true",
                         help="also make the quad mesh (default quad size) and time its stages")
     return parser.parse_known_args(argv)
@@ -314,7 +322,8 @@ def main(argv=None) -> int:
         with tempfile.TemporaryDirectory() as own:  # rank 0's folder on every rank
             tmp = comm.bcast(own, root=0)
             record = run_one(args.one[0], float(args.one[1]), args.max_it, Path(tmp) / "out",
-                             petsc_argv, quads=args.quads, levels=args.levels)
+                             petsc_argv, quads=args.quads, levels=args.levels,
+                             nested_meshes=args.nested_meshes)
             comm.Barrier()  # every rank done with the folder before rank 0 removes it
         if comm.rank == 0:
             args.record.write_text(json.dumps(record))

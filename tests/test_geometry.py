@@ -95,6 +95,56 @@ def test_large_meshes_are_refined_coarse_meshes(monkeypatch):
     assert integrate(refined, ufl.ds) == pytest.approx(3 * math.pi, rel=2e-3)
 
 
+def _vertices(domain):
+    """Every vertex of the mesh (all ranks), rounded for matching."""
+    x = domain.mesh.geometry.x[: domain.mesh.topology.index_map(0).size_local, :2]
+    return {tuple(p) for part in COMM.allgather(np.round(x, 10).tolist()) for p in part}
+
+
+@pytest.mark.parametrize("shape", ["piano", "annulus"])
+def test_refinements_give_a_mesh_nested_in_the_coarser_one(shape):
+    """``refinements=k``: the mesh of size factor 2^k split k times, so four times its
+    triangles per split and all its vertices; the new boundary vertices lie on the
+    curves (the annulus' circles to rounding), the new interior ones at midpoints of
+    coarse edges."""
+    coarse = geometry.build(COMM, shape, mesh_size=H, size_factor=2.0)
+    fine = geometry.build(COMM, shape, mesh_size=H, refinements=1)
+    assert num_cells(fine) == 4 * num_cells(coarse)
+    coarse_vertices, fine_vertices = _vertices(coarse), _vertices(fine)
+    assert coarse_vertices <= fine_vertices
+    assert len(fine_vertices) == fine.num_vertices
+    if shape == "annulus":
+        r = np.linalg.norm(np.array(sorted(fine_vertices)), axis=1)
+        on_circle = np.minimum(np.abs(r - 0.5), np.abs(r - 1.0))
+        boundary = on_circle < 1e-3 * H
+        assert boundary.sum() == 2 * sum(
+            1 for p in coarse_vertices
+            if min(abs(np.hypot(*p) - 0.5), abs(np.hypot(*p) - 1.0)) < 1e-3 * H)
+        assert on_circle[boundary].max() < 1e-9  # the coordinates are rounded to 1e-10
+    assert integrate(fine, ufl.dx) == pytest.approx(integrate(coarse, ufl.dx), rel=0.02)
+
+
+def test_build_nested_splits_one_coarse_mesh():
+    """Coarse to fine, four times the triangles per level from one Gmsh mesh; the finest
+    about the requested size (where the coarsest is not held finer by the curves' points
+    per turn, as the piano's is at 0.4)."""
+    levels = geometry.build_nested(COMM, "piano", 3, mesh_size=H / 2)
+    direct = geometry.build(COMM, "piano", mesh_size=H / 2)
+    counts = [num_cells(d) for d in levels]
+    assert counts == [counts[0], 4 * counts[0], 16 * counts[0]]
+    assert levels[-1].mesh_size == pytest.approx(direct.mesh_size, rel=0.15)
+    assert _vertices(levels[0]) <= _vertices(levels[1]) <= _vertices(levels[2])
+    assert [d.euler_characteristic for d in levels] == [direct.euler_characteristic] * 3
+
+
+@pytest.mark.parametrize("value", [-1, 1.5, True, "2"])
+def test_refinements_must_be_a_non_negative_integer(value):
+    with pytest.raises(GeometryError, match="refinements must be a non-negative integer"):
+        geometry.build(COMM, "piano", mesh_size=H, refinements=value)
+    with pytest.raises(GeometryError, match="levels must be a positive integer"):
+        geometry.build_nested(COMM, "piano", 0, mesh_size=H)
+
+
 def test_mesh_size_refines():
     coarse, fine = geometry.piano(COMM, 0.2), geometry.piano(COMM, 0.1)
     assert 3 < num_cells(fine) / num_cells(coarse) < 5

@@ -174,9 +174,27 @@ def test_auto_levels_keeps_the_coarsest_mesh_above_the_threshold():
 
 def test_run_solve_auto_levels_nests_a_fine_mesh(tmp_path):
     """The default (--levels auto) on 7.5e3 triangles: two meshes, 1887 then 7539 triangles,
-    and the result converged on the fine one."""
+    each meshed by Gmsh, and the result converged on the fine one."""
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
     summary = cli.run_solve("piano", mesh_size=0.025, out=out, quiet=True, comm=COMM)
     assert [e["triangles"] for e in summary["levels"]] == [1887, summary["num_cells"]]
     assert summary["converged"]
     assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]
+
+
+def test_run_solve_nested_meshes_splits_the_coarsest(tmp_path):
+    """--nested-meshes: the fine mesh is the coarse one split once (4x its triangles), a
+    converged solve there from the coarse solution, MBO's singularities kept."""
+    out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
+    summary = cli.run_solve("piano", mesh_size=0.05, out=out, quiet=True, comm=COMM, levels=2,
+                            nested_meshes=True)
+    coarse, fine = (e["triangles"] for e in summary["levels"])
+    assert fine == 4 * coarse == summary["num_cells"]
+    assert summary["converged"]
+    assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]
+
+
+def test_nested_meshes_flag_reaches_run_solve():
+    args = cli.build_parser().parse_args(["solve", "piano", "--levels", "2", "--nested-meshes"])
+    assert args.nested_meshes and args.levels == 2
+    assert not cli.build_parser().parse_args(["solve", "piano"]).nested_meshes

@@ -208,6 +208,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "size 2^(L-1) times the requested one, then each finer mesh from the "
                        "coarser solution (default 'auto': as many as keep the coarsest mesh "
                        "at 1500 triangles or more, one mesh for a .msh or --conformal)")
+    solve.add_argument("--nested-meshes", action="store_true",
+                       help="with --levels: mesh the coarsest level only and make each finer "
+                       "one by splitting every triangle into 4; about twice as fast, but the "
+                       "split meshes end at a 10-30%% higher H than meshes of the same size "
+                       "made by Gmsh (default: every level meshed by Gmsh)")
     solve.add_argument("-q", "--quiet", action="store_true", help="no progress output")
 
     commands.add_parser("info", help="print the versions of the libraries in use",
@@ -433,6 +438,7 @@ def run_solve(
     conformal: bool = False,
     resume=None,
     levels: int | str = "auto",
+    nested_meshes: bool = False,
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
     :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
@@ -446,7 +452,9 @@ def run_solve(
     (:meth:`~ufl_frames.pipeline.FrameField.nested`) over meshes of size factors
     2^(levels-1) … 1 of ``size_factor`` ('auto': :func:`auto_levels` of the requested
     mesh, one level for a ``.msh`` or ``conformal``; a coarse mesh that fails or loses a
-    hole ends the coarsening there); :class:`RunError` when a solve or
+    hole ends the coarsening there; with ``nested_meshes`` the levels of
+    :func:`ufl_frames.geometry.build_nested` instead, one level fewer where its coarsest
+    fails or loses a hole); :class:`RunError` when a solve or
     writing the results fails on every rank alike (a PETSc error, a full disk); other
     exceptions are bugs and keep their type. ``out`` is written whole or not at all
     (:class:`ufl_frames.io.OutputFolder`). PETSc options in the database
@@ -479,7 +487,7 @@ def run_solve(
                       size_factor=size_factor, max_triangles=max_triangles,
                       max_aspect=max_aspect, free_singularities=free_singularities,
                       max_it=max_it, conformal=conformal, levels=levels,
-                      petsc_options=user_options)
+                      nested_meshes=nested_meshes, petsc_options=user_options)
     saved = None
     if resume is not None:
         try:
@@ -504,23 +512,27 @@ def run_solve(
         can_coarsen = not (conformal or geometry.lower().endswith(".msh"))
         levels = auto_levels(domain.num_cells) if can_coarsen else 1
     coarse = []  # nested iteration: the coarser meshes, coarsest first
-    for k in range(levels - 1, 0, -1):
-        say(f"meshing level {levels - 1 - k} (size factor {2**k:g}) ...")
-        try:
-            level = geometry_module.build(comm, geometry, mesh_size, size_factor * 2**k,
-                                          **limit)
-            if level.euler_characteristic != domain.euler_characteristic:
-                raise geometry_module.GeometryError(
-                    f"at size factor {2**k:g} the mesh has Euler characteristic "
-                    f"{level.euler_characteristic}, not {domain.euler_characteristic} "
-                    "(a hole or a thin part is lost)")
-        except geometry_module.GeometryError as e:
-            if not automatic:
-                raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
-            say(f"  note: no coarser level: {e}")
-            coarse = []  # the coarser levels are worse still: start from the finer ones
-            continue
-        coarse.append(level)
+    if nested_meshes:
+        coarse, domain = _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor,
+                                        limit, automatic, say)
+    else:  # every level meshed by Gmsh
+        for k in range(levels - 1, 0, -1):
+            say(f"meshing level {levels - 1 - k} (size factor {2**k:g}) ...")
+            try:
+                level = geometry_module.build(comm, geometry, mesh_size, size_factor * 2**k,
+                                              **limit)
+                if level.euler_characteristic != domain.euler_characteristic:
+                    raise geometry_module.GeometryError(
+                        f"at size factor {2**k:g} the mesh has Euler characteristic "
+                        f"{level.euler_characteristic}, not {domain.euler_characteristic} "
+                        "(a hole or a thin part is lost)")
+            except geometry_module.GeometryError as e:
+                if not automatic:
+                    raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
+                say(f"  note: no coarser level: {e}")
+                coarse = []  # the coarser levels are worse still: start from the finer ones
+                continue
+            coarse.append(level)
     interrupts.set_stage("the MBO initial field")
     interrupts.checkpoint(comm)
     for note in domain.notes:
@@ -552,6 +564,35 @@ def run_solve(
 #: PETSc options that change what a run prints, not what it computes: not compared
 #: when resuming.
 _OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info$")
+
+
+def _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor, limit, automatic,
+                   say):
+    """(coarser levels, finest) of :func:`ufl_frames.geometry.build_nested` for ``--levels``
+    with ``--nested-meshes``; ``domain`` (the mesh at the requested size) where there is one
+    level only. ``automatic``: a coarsest mesh that fails or loses a hole means one level
+    fewer, not an :class:`InputError`."""
+    from ufl_frames import geometry as geometry_module
+
+    while levels > 1:
+        say(f"meshing {levels} nested levels (the coarsest at size factor "
+            f"{2**(levels - 1):g}, split {levels - 1} time(s)) ...")
+        try:
+            hierarchy = geometry_module.build_nested(comm, geometry, levels, mesh_size,
+                                                     size_factor, **limit)
+            if hierarchy[0].euler_characteristic != domain.euler_characteristic:
+                raise geometry_module.GeometryError(
+                    f"at size factor {2**(levels - 1):g} the mesh has Euler characteristic "
+                    f"{hierarchy[0].euler_characteristic}, not {domain.euler_characteristic} "
+                    "(a hole or a thin part is lost)")
+        except geometry_module.GeometryError as e:
+            if not automatic:
+                raise InputError(f"--levels {levels} --nested-meshes: {e}") from e
+            say(f"  note: {e}: one level fewer")
+            levels -= 1
+            continue
+        return hierarchy[:-1], hierarchy[-1]
+    return [], domain
 
 
 def _run_record(geometry: str, comm, **arguments) -> dict:
@@ -1003,7 +1044,7 @@ def main(argv: list[str] | None = None) -> int:
                         quad_size=args.quad_size,
                         quads=args.quads,
                         conformal=args.conformal,
-                        levels=args.levels,
+                        levels=args.levels, nested_meshes=args.nested_meshes,
                     )
                 except Exception as e:
                     watch.stage = "reporting the failure"
