@@ -198,3 +198,34 @@ def test_nested_meshes_flag_reaches_run_solve():
     args = cli.build_parser().parse_args(["solve", "piano", "--levels", "2", "--nested-meshes"])
     assert args.nested_meshes and args.levels == 2
     assert not cli.build_parser().parse_args(["solve", "piano"]).nested_meshes
+
+
+def test_nested_meshes_fall_back_one_level_when_the_coarsest_fails(monkeypatch):
+    """--levels auto --nested-meshes: a coarsest mesh Gmsh cannot make (or that loses a
+    hole) means one level fewer, said in a note; with --levels given it is an error."""
+    real = geometry.build_nested
+
+    def build_nested(comm, name, levels, *args, **kwargs):
+        if levels > 2:
+            raise geometry.GeometryError("too coarse to mesh")
+        return real(comm, name, levels, *args, **kwargs)
+
+    monkeypatch.setattr(geometry, "build_nested", build_nested)
+    domain = geometry.build(COMM, "piano", mesh_size=0.05)
+    said = []
+    coarse, fine = cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, True,
+                                      said.append)
+    assert len(coarse) == 1 and fine.num_cells == 4 * coarse[0].num_cells
+    assert any("too coarse to mesh: one level fewer" in line for line in said)
+    with pytest.raises(cli.InputError, match="--levels 3 --nested-meshes: too coarse"):
+        cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, False, said.append)
+
+
+def test_a_coarse_level_must_keep_the_holes():
+    from types import SimpleNamespace
+
+    with pytest.raises(geometry.GeometryError, match="Euler characteristic 1, not 0"):
+        cli._check_same_topology(SimpleNamespace(euler_characteristic=1),
+                                 SimpleNamespace(euler_characteristic=0), 4)
+    cli._check_same_topology(SimpleNamespace(euler_characteristic=0),
+                             SimpleNamespace(euler_characteristic=0), 4)

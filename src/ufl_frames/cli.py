@@ -521,11 +521,7 @@ def run_solve(
             try:
                 level = geometry_module.build(comm, geometry, mesh_size, size_factor * 2**k,
                                               **limit)
-                if level.euler_characteristic != domain.euler_characteristic:
-                    raise geometry_module.GeometryError(
-                        f"at size factor {2**k:g} the mesh has Euler characteristic "
-                        f"{level.euler_characteristic}, not {domain.euler_characteristic} "
-                        "(a hole or a thin part is lost)")
+                _check_same_topology(level, domain, 2**k)
             except geometry_module.GeometryError as e:
                 if not automatic:
                     raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
@@ -566,6 +562,16 @@ def run_solve(
 _OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info$")
 
 
+def _check_same_topology(level, domain, factor) -> None:
+    """A coarse level of nested iteration must keep the domain's holes and thin parts."""
+    from ufl_frames.geometry import GeometryError
+
+    if level.euler_characteristic != domain.euler_characteristic:
+        raise GeometryError(f"at size factor {factor:g} the mesh has Euler characteristic "
+                            f"{level.euler_characteristic}, not {domain.euler_characteristic} "
+                            "(a hole or a thin part is lost)")
+
+
 def _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor, limit, automatic,
                    say):
     """(coarser levels, finest) of :func:`ufl_frames.geometry.build_nested` for ``--levels``
@@ -580,11 +586,7 @@ def _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor, limit
         try:
             hierarchy = geometry_module.build_nested(comm, geometry, levels, mesh_size,
                                                      size_factor, **limit)
-            if hierarchy[0].euler_characteristic != domain.euler_characteristic:
-                raise geometry_module.GeometryError(
-                    f"at size factor {2**(levels - 1):g} the mesh has Euler characteristic "
-                    f"{hierarchy[0].euler_characteristic}, not {domain.euler_characteristic} "
-                    "(a hole or a thin part is lost)")
+            _check_same_topology(hierarchy[0], domain, 2**(levels - 1))
         except geometry_module.GeometryError as e:
             if not automatic:
                 raise InputError(f"--levels {levels} --nested-meshes: {e}") from e
