@@ -458,7 +458,8 @@ def build_nested(
     its gradient across coarse edges into the fine triangles that straddle them, in
     bands along the coarse mesh's rows (the non-isotropic piano's start from 6.3·10³ on
     2.5·10⁴ triangles: 7.7x the coarse H, nested 2.9x; that level then took 116 Newton
-    steps, nested 43, to an H 38 % lower).
+    steps, nested 43). Split meshes are worse meshes for H, though: a one-mesh solve ends
+    8-30 % higher than on a Gmsh mesh of the same size (``benchmarks/README.md``).
     """
     if isinstance(levels, bool) or not isinstance(levels, numbers.Integral) or levels < 1:
         raise GeometryError(f"levels must be a positive integer, got {levels!r}")
