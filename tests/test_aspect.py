@@ -371,3 +371,26 @@ def test_aspect_bound_rule():
     assert aspect_bound(False, 4) == 4.0
     with pytest.raises(ValueError, match="max_aspect"):
         aspect_bound(False, 0.5)
+
+
+@pytest.mark.parametrize("aspect", [1.5, 4.0, 10.0])
+def test_pushed_off_bound_is_what_the_projection_clamps(aspect):
+    """A frame on the bound is pushed off by a step iff the projection of q + ε·step (the
+    retraction) has to clamp it: checked against :func:`odeco.project` without and with
+    the bound, for random steps; frames inside the bound are never pushed off."""
+    rng = np.random.default_rng(16)
+    n = 400
+    q = frames_on_bound(rng, n, aspect)
+    step = rng.standard_normal((n, 5))
+    eps = 1e-6 * np.linalg.norm(q, axis=1, keepdims=True) / np.linalg.norm(step, axis=1)[:, None]
+    trial = q + eps * step
+    clamped = np.linalg.norm(odeco.project(trial, max_aspect=aspect) - odeco.project(trial),
+                             axis=1)
+    clear = (clamped > 1e-4 * eps[:, 0] * np.linalg.norm(step, axis=1)) | (clamped == 0.0)
+    assert clear.mean() > 0.95
+    pushed = odeco.pushed_off_bound(q, step, aspect)
+    assert np.array_equal(pushed[clear], clamped[clear] > 0)
+    assert 0.2 < pushed.mean() < 0.8  # both cases are exercised
+    inside = odeco.frames_to_q(np.stack([np.ones(n), np.full(n, 0.5 * (1 + aspect))], axis=1),
+                               rng.uniform(-np.pi, np.pi, n))
+    assert not odeco.pushed_off_bound(inside, step, aspect).any()

@@ -121,6 +121,7 @@ def shared_tmp(tmp_path):
         (["-frames_gn_damping_min", "nan"], ["-frames_gn_damping_min"]),
         (["-frames_gn_damping_min", "inf"], ["-frames_gn_damping_min"]),
         (["-tao_gttol", "-1"], ["-tao_gttol"]),
+        (["-frames_active_consistent", "maybe"], ["-frames_active_consistent", "true or false"]),
     ],
 )
 def test_bad_petsc_options_are_usage_errors(options, words, shared_tmp, capsys, monkeypatch):

@@ -34,6 +34,9 @@ _POSITIVE_INTS = ("tao_max_it",)
 _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
                        "tao_gatol", "tao_grtol", "tao_gttol")
 _REALS = ("tao_fmin",)
+#: Switches (``-name`` alone means true) and the values PETSc reads as one.
+_BOOLS = ("frames_gn_adapt", "frames_gn_adapt_bound", "frames_active_consistent")
+_BOOL_VALUES = ("true", "false", "yes", "no", "on", "off", "1", "0")
 
 
 def _registered(kind: str, name: str) -> bool:
@@ -58,11 +61,16 @@ def petsc_option_problem(options) -> str | None:
 
     ``-tao_type`` must be one of :data:`TAO_TYPES`; ``-*ksp_type``, ``-*pc_type`` and
     ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer; ``-frames_hessian``
-    one of :data:`HESSIANS`; dampings and tolerances finite numbers >= 0.
+    one of :data:`HESSIANS`; dampings and tolerances finite numbers >= 0; switches
+    (``-frames_gn_adapt``, ``-frames_active_consistent``, ...) true or false.
     """
     values = dict(options.items() if isinstance(options, dict) else options)
     for name, value in values.items():
         name = str(name).lstrip("-")
+        if name in _BOOLS:
+            if value is not None and str(value).strip().lower() not in ("", *_BOOL_VALUES):
+                return f"-{name} must be true or false, got {value!r}"
+            continue
         typed = _TYPE_SUFFIX.fullmatch(name)
         checked = typed is not None or name in (
             "tao_type", "frames_hessian", *_POSITIVE_INTS, *_NON_NEGATIVE_REALS, *_REALS)

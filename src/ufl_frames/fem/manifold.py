@@ -20,6 +20,8 @@ pymanopt's manifolds:
   columns where a direction is absent) of the pointwise tangent space;
 * :meth:`~FrameManifold.tangent_project` (step 2) and
   :meth:`~FrameManifold.riemannian_gradient` (step 2 and the sphere's tangent);
+* :meth:`~FrameManifold.pushed_off_bound`: the frames a step would push across the
+  aspect bound;
 * :meth:`~FrameManifold.curvature_blocks` and :meth:`~FrameManifold.sphere_curvature`:
   the second-order terms that turn a Euclidean Hessian into the Riemannian one;
 * :meth:`~FrameManifold.inner` and :meth:`~FrameManifold.norm2`: the metric, reduced over
@@ -152,6 +154,15 @@ class FrameManifold:
         tangent = self.tangent_project(rows, gradient_x, held=held)[:n]
         x = self.to_x(rows)
         return tangent - (self.inner(tangent, x) / self.inner(x, x)) * x
+
+    def pushed_off_bound(self, rows: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """Owned rows on the aspect bound that ``step`` (owned rows, in x or q) pushes
+        outwards to first order, which the retraction would clamp back (all False without
+        a bound or for isotropic frames)."""
+        c, n = self.constraints, self.owned
+        if c.isotropic or c.max_aspect is None:
+            return np.zeros(n, dtype=bool)
+        return odeco.pushed_off_bound(rows[:n], step[:n], c.max_aspect)
 
     # --- curvature ---------------------------------------------------------------------
 

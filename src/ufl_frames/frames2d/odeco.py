@@ -270,6 +270,24 @@ def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False, held=None):
     return basis / np.where(norm > 0, norm, 1.0)
 
 
+def pushed_off_bound(q, direction, max_aspect: float) -> np.ndarray:
+    """Frames on the aspect bound that a step along ``direction`` (N, 5) pushes outwards,
+    to first order (N,) bool; ``q`` on the variety.
+
+    The test of :func:`ufl_frames.frames2d.aspect.active_bound` with the step in place of
+    the descent direction −g: the retraction would clamp these frames back onto the
+    bound, bending the step (see ``GaussNewtonModel._consistent_active_set``).
+    """
+    q = _check_q(q)
+    direction = _check_q(direction, "direction")
+    s, d, c4, s4 = _parameters_on_variety(q)
+    c2, s2 = _half_angle(c4, s4)
+    zero = np.zeros_like(s)
+    e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
+    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
+    return active_bound(s, d, -direction, e_s, e_d, max_aspect)[0]
+
+
 def tangent_curvature(
     q, gradient, max_aspect: float | None = None, isotropic: bool = False, active_gradient=None
 ) -> np.ndarray:

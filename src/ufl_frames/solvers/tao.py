@@ -37,7 +37,8 @@ on round-off. TAO types:
   sparse Cholesky factorisation in reduced tangent coordinates, 3 unknowns per vertex,
   see :func:`newton_pc_options`); the Gauss–Newton
   damping adapts to the line search (``-frames_gn_adapt``) and the aspect bound's active
-  set is held until releasing it pays (``-frames_active_release η``, 0 to turn off);
+  set is held until releasing it pays (``-frames_active_release η``, 0 to turn off), or,
+  for ``nls`` with ``-frames_active_consistent``, decided with the Newton step itself;
   with the aspect bound, ``nls`` backtracks (``-tao_ls_type armijo``, see
   :data:`BOUNDED_OPTIONS`);
 * ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
@@ -437,11 +438,17 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
                     and opts.getString(f"{prefix}pc_type", "") == "python"
                     and opts.getString(f"{prefix}pc_python_type", "").endswith(
                         "ReducedFactorPC"))
+            # -frames_active_consistent (nls, opt-in): the steps are checked against the
+            # aspect bound (GaussNewtonModel._consistent_active_set) instead of holding the
+            # active set; fewer Newton steps, but more factorisations (benchmarks/README).
+            consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", False)
             model = owned.enter_context(GaussNewtonModel(
                 problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
                 adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
-                release=opts.getReal("frames_active_release", RELEASE_RATIO),
+                release=opts.getReal("frames_active_release",
+                                     0.0 if consistent else RELEASE_RATIO),
+                consistent=consistent,
                 bound_steps=opts.getBool("frames_gn_adapt_bound", True),
                 exact=hessian == "exact", lean=lean,
                 switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
