@@ -473,6 +473,7 @@ def test_output_folder_refuses_to_replace_another_runs_results(shared_tmp):
     with pytest.raises((io.OutputFolderBusy, io.WriteError), match="another run"):
         second.commit()
     second.discard()
+    COMM.Barrier()  # discard is rank 0's alone (not collective): wait for it before looking
     assert (out / "summary.json").read_text() == "first"
     assert_nothing_partial(shared_tmp)
 
