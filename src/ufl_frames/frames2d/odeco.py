@@ -250,15 +250,23 @@ def _parameters_on_variety(q):
     return s, 2 * (q[:, 1] * c2 + q[:, 2] * s2), c4, s4
 
 
+def _length_directions(c4, s4):
+    """e_s(t), e_d(t) (N, 5), the directions of s = l1 + l2 and d = l1 − l2 at the frames'
+    angle t (from cos 4t, sin 4t), unnormalised, and cos 2t, sin 2t."""
+    c2, s2 = _half_angle(c4, s4)
+    zero = np.zeros_like(c4)
+    e_s = np.stack([np.full_like(c4, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
+    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
+    return e_s, e_d, c2, s2
+
+
 def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False, held=None):
     if on_variety:
         s, d, c4, s4 = _parameters_on_variety(q)
     else:
         s, d, c4, s4 = _closest_parameters(q, isotropic=False)
-    c2, s2 = _half_angle(c4, s4)
+    e_s, e_d, c2, s2 = _length_directions(c4, s4)
     zero = np.zeros_like(s)
-    e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
-    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
     dq_dt = np.stack([zero, -d * s2, d * c2, -s * s4 / 2, s * c4 / 2], axis=1)
     if max_aspect is not None:
         active, sign, kappa = active_bound(s, d, gradient, e_s, e_d, max_aspect, held)
@@ -281,10 +289,7 @@ def pushed_off_bound(q, direction, max_aspect: float) -> np.ndarray:
     q = _check_q(q)
     direction = _check_q(direction, "direction")
     s, d, c4, s4 = _parameters_on_variety(q)
-    c2, s2 = _half_angle(c4, s4)
-    zero = np.zeros_like(s)
-    e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
-    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
+    e_s, e_d, _, _ = _length_directions(c4, s4)
     return active_bound(s, d, -direction, e_s, e_d, max_aspect)[0]
 
 
@@ -306,10 +311,8 @@ def tangent_curvature(
     gradient = _check_q(gradient, "gradient")
     active_gradient = gradient if active_gradient is None else active_gradient
     s, d, c4, s4 = _parameters_on_variety(q)
-    c2, s2 = _half_angle(c4, s4)
+    e_s, e_d, c2, s2 = _length_directions(c4, s4)
     zero = np.zeros_like(s)
-    e_s = np.stack([np.full_like(s, 3 * SQRT2 / 8), zero, zero, c4 / 8, s4 / 8], axis=1)
-    e_d = np.stack([zero, c2 / 2, s2 / 2, zero, zero], axis=1)
     e_s1 = np.stack([zero, zero, zero, -s4 / 2, c4 / 2], axis=1)
     e_d1 = np.stack([zero, -s2, c2, zero, zero], axis=1)
     e_s2 = np.stack([zero, zero, zero, -2 * c4, -2 * s4], axis=1)

@@ -87,6 +87,11 @@ def _block_diagonal(blocks: np.ndarray, index_map, comm, result=None) -> PETSc.M
     return result
 
 
+def _on_bound(basis: np.ndarray) -> np.ndarray:
+    """The rows a tangent basis (N, 5, 3) holds on the aspect bound: no e_d column."""
+    return np.linalg.norm(basis[:, :, 1], axis=1) == 0
+
+
 class GaussNewtonModel:
     r"""Riemannian (Gauss–)Newton Hessian of H on 𝓜, with Sobolev (H¹) damping.
 
@@ -234,7 +239,7 @@ class GaussNewtonModel:
         manifold, n = problem.manifold, problem.owned
         basis = manifold.tangent_basis(problem.rows, evaluation.gradient_x, held=problem.held)
         if not problem.constraints.isotropic:  # frames held on the aspect bound (no e_d)
-            self.active = np.linalg.norm(basis[:, :, 1], axis=1) == 0
+            self.active = _on_bound(basis)
         self._basis = basis[:n]  # for reduced_operator (the tangent basis of this model)
         if self.exact:
             self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
@@ -446,7 +451,7 @@ class GaussNewtonModel:
         pc = self._reduced_pc(ksp)
         if free is None or pc is None or pc.getPythonContext().work is None:
             return
-        active = np.linalg.norm(free[:, :, 1], axis=1) == 0
+        active = _on_bound(free)
         if self.problem.held is not None:
             active |= self.problem.held
         self._hold_pushed(self._pushed_off_bound(pc, g), active, g)
@@ -510,7 +515,7 @@ class GaussNewtonModel:
         if free is None:
             return False
         problem = self.problem
-        active = np.linalg.norm(free[:, :, 1], axis=1) == 0
+        active = _on_bound(free)
         n = problem.owned
         new = bool(np.any(active[:n] & ~self.active[:n]))
         return problem.constraints.comm.allreduce(new, op=MPI.LOR)
