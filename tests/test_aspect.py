@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from ufl_frames.frames2d import odeco
-from ufl_frames.frames2d.aspect import aspect_bound, clamp_aspect
+from ufl_frames.frames2d.aspect import active_bound, aspect_bound, clamp_aspect
 
 ASPECTS = [1.0, 1.5, 4.0, 10.0]
 ES2, ED2 = 19.0 / 64.0, 1.0 / 4.0  # |e_s|², |e_d|²
@@ -354,6 +354,56 @@ def test_tangent_basis_active_set_is_first_order_feasibility(aspect):
     assert np.array_equal(active[clear], leaves[clear] > 0)
     assert 0.2 < active.mean() < 0.8  # both cases are exercised
     check_orthonormal(basis)
+
+
+def test_tangent_basis_only_held_is_the_given_set():
+    """With ``only_held`` the held rows on the bound are the active set whatever the
+    gradient: a held frame keeps the bound's basis under an inward gradient, an unheld one
+    keeps e_d under an outward gradient, and a held frame inside the bound is free."""
+    rng = np.random.default_rng(17)
+    n = 100
+    q = frames_on_bound(rng, n, 4.0)
+    d_sign = np.where(odeco.q_to_frames(q)[0] @ np.array([1.0, -1.0]) < 0, -1.0, 1.0)
+    e_d = unit_e_d(q)
+    outward = rng.random(n) < 0.5
+    gradient = np.where(outward, -1.0, 1.0)[:, None] * d_sign[:, None] * e_d
+    held = rng.random(n) < 0.5
+    assert (held & ~outward).any() and (~held & outward).any()
+    basis = odeco.tangent_basis(q, max_aspect=4.0, gradient=gradient, held=held,
+                                only_held=True)
+    check_orthonormal(basis)
+    bound = odeco.tangent_basis(q, max_aspect=4.0, gradient=-d_sign[:, None] * e_d)
+    assert np.array_equal(basis[held], bound[held])  # the bound's basis, as if pushed out
+    assert np.array_equal(basis[~held], odeco.tangent_basis(q[~held]))
+    # the union semantics (the default) would have made the outward unheld frames active
+    union = odeco.tangent_basis(q, max_aspect=4.0, gradient=gradient, held=held)
+    assert np.all(union[~held & outward, :, 1] == 0.0)
+    inside = odeco.frames_to_q(np.stack([np.ones(n), np.full(n, 2.0)], axis=1),
+                               rng.uniform(-np.pi, np.pi, n))
+    free = odeco.tangent_basis(inside, max_aspect=4.0, gradient=gradient,
+                               held=np.ones(n, bool), only_held=True)
+    assert np.array_equal(free, odeco.tangent_basis(inside))
+    with pytest.raises(ValueError, match="held"):
+        s_, d_ = np.ones(n), np.ones(n)
+        active_bound(s_, d_, gradient, gradient, gradient, 4.0, held=None, only_held=True)
+
+
+def test_tangent_curvature_follows_a_given_active_set():
+    """``tangent_curvature(..., active=mask)`` is the curvature in the columns of the basis
+    with that active set: equal to the one whose gradient decides the same set."""
+    rng = np.random.default_rng(18)
+    n = 100
+    q = frames_on_bound(rng, n, 4.0)
+    d_sign = np.where(odeco.q_to_frames(q)[0] @ np.array([1.0, -1.0]) < 0, -1.0, 1.0)
+    e_d = unit_e_d(q)
+    mask = rng.random(n) < 0.5
+    deciding = np.where(mask, -1.0, 1.0)[:, None] * d_sign[:, None] * e_d  # outward where mask
+    gradient = rng.standard_normal((n, 5))
+    expected = odeco.tangent_curvature(q, gradient, 4.0, active_gradient=deciding)
+    given = odeco.tangent_curvature(q, gradient, 4.0, active_gradient=-deciding, active=mask)
+    assert np.array_equal(given, expected)
+    assert not np.array_equal(
+        odeco.tangent_curvature(q, gradient, 4.0, active_gradient=-deciding), expected)
 
 
 def test_tangent_basis_rejects_bad_bounds():

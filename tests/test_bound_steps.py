@@ -21,10 +21,14 @@ EARLIER = {"tao_ls_type": "more-thuente", "frames_gn_adapt_bound": "false"}
 def piano_solve(options=None, mesh_size=0.05):
     """The non-isotropic piano from MBO with ``options`` on top of the defaults, with the
     Gauss–Newton model throughout (the rule is the damping's, which the hybrid model's
-    exact tail does not need)."""
+    exact tail does not need) and the hold-and-release rule of the active set, which the
+    rule was made for: with the consistent rule (nls's default) and Gauss–Newton alone it
+    costs steps (measured at h = 0.05: 91 against 29 without it), with the hybrid model,
+    the default, it saves them (13 against 27; at h = 0.025 24 against 50)."""
     domain = geometry.build(COMM, "piano", mesh_size=mesh_size)
     field = FrameField.initial(domain)
-    options = {"frames_hessian": "gauss_newton", **(options or {})}
+    options = {"frames_hessian": "gauss_newton", "frames_active_consistent": "false",
+               **(options or {})}
     with options_scope(list(options.items())):
         result = field.solve(max_it=500)
     return result

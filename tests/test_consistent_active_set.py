@@ -1,6 +1,7 @@
 """The aspect bound's active set decided with the Newton step (``nls``,
-``-frames_active_consistent``, :meth:`GaussNewtonModel._consistent_active_set`): frames
-the step would push off the bound are held, so that the retraction does not bend it.
+``-frames_active_consistent``, the default, :meth:`GaussNewtonModel._consistent_active_set`):
+held frames are released by the model's multiplier and frames the step would push off the bound
+are held, so that the retraction does not bend it.
 
 Serial and under MPI (``mpirun -n 2 python -m pytest -m "not serial"``).
 """
@@ -12,10 +13,11 @@ from mpi4py import MPI
 from ufl_frames import geometry
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.pipeline import FrameField
-from ufl_frames.solvers.hessian import GaussNewtonModel
+from ufl_frames.solvers.hessian import CONSISTENT_ROUNDS, GaussNewtonModel
 
 COMM = MPI.COMM_WORLD
-CONSISTENT = {"frames_active_consistent": "true"}
+CONSISTENT = {"frames_active_consistent": "true"}  # the default of nls, said explicitly
+HELD = {"frames_active_consistent": "false"}  # the hold-and-release rule instead
 
 
 def piano_solve(options=None):
@@ -27,10 +29,10 @@ def piano_solve(options=None):
 
 
 def test_consistent_steps_reach_the_same_minimum_in_fewer_newton_steps():
-    """The same stationary field as the hold-and-release rule (measured: H 9e-5 apart
-    relatively, both converged; singularities equal) in fewer Newton steps (16 against
-    31 measured)."""
-    held_field, held = piano_solve()
+    """The same stationary field as the hold-and-release rule (measured: H equal to 7
+    digits, both converged; singularities equal) in fewer Newton steps (13 against 31
+    measured)."""
+    held_field, held = piano_solve(HELD)
     field, consistent = piano_solve(CONSISTENT)
     for result in (held, consistent):
         assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
@@ -40,31 +42,30 @@ def test_consistent_steps_reach_the_same_minimum_in_fewer_newton_steps():
     assert consistent.iterations < 0.8 * held.iterations
 
 
-def test_the_newton_step_pushes_no_free_frame_off_the_bound(monkeypatch):
-    """After the rule, the step of the factorisation the Krylov solve uses pushes no frame
-    off the bound that the model leaves free (the rounds never ran out here: 27 of the 44
-    checks held frames); the rule holds frames on this solve (it is exercised)."""
-    after, fired = [], []
+def test_the_rounds_release_by_the_multiplier_and_settle(monkeypatch):
+    """The rule is exercised both ways (frames released by the model's multiplier, frames
+    held because the step pushes them out), stays within its rounds, and where the rounds
+    settled, the step of the factorisation the Krylov solve uses pushes no frame off the
+    bound that the model leaves free (measured on this solve: 9 of 13 steps settled,
+    serial and on 2 ranks)."""
+    rounds, after = [], []
     check = GaussNewtonModel._consistent_active_set
-    hold = GaussNewtonModel._hold_pushed
-
-    def recording_hold(self, pushed, active, g):
-        changed = hold(self, pushed, active, g)
-        fired.append(changed)
-        return changed
 
     def recording(self, ksp, H, P, g):
         check(self, ksp, H, P, g)
-        pc = self._reduced_pc(ksp)
-        if pc is None or self.active is None:
+        rounds.append(list(self.bound_rounds))
+        pc = ksp.getPC()
+        if self.active is None or self.bound_rounds[-1] != (0, 0):
             return
         n = self.problem.owned
         pushed = self._pushed_off_bound(pc, g) & ~self.active[:n]
         after.append(COMM.allreduce(int(np.count_nonzero(pushed)), op=MPI.SUM))
 
     monkeypatch.setattr(GaussNewtonModel, "_consistent_active_set", recording)
-    monkeypatch.setattr(GaussNewtonModel, "_hold_pushed", recording_hold)
     _, result = piano_solve(CONSISTENT)
     assert result.converged_reason.startswith("CONVERGED")
-    assert any(fired), "no frame was pushed off the bound: the rule was not exercised"
-    assert after and all(count == 0 for count in after), after
+    assert all(len(r) <= CONSISTENT_ROUNDS + 1 for r in rounds)
+    assert sum(r[0][0] for r in rounds if r) > 0, "no frame released by the multiplier"
+    assert sum(p for r in rounds for _, p in r) > 0, "no pushed frame held"
+    assert all(released == 0 for r in rounds for released, _ in r[1:])  # first round only
+    assert len(after) >= len(rounds) // 2 and all(count == 0 for count in after), after

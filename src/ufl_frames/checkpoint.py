@@ -123,6 +123,7 @@ class CheckpointFolder:
                 "tao_gnorm0": state.tao_gnorm0, "wall_time_s": state.wall_time_s,
                 "step": state.step, "adaptation": state.adaptation,
                 "model_gnorm0": state.model_gnorm0, "exact_hessian": state.exact_hessian,
+                "held_only": state.held_only,
                 "num_processes": self.comm.size,
             }
             arrays = {"q": q, **{k: v for k, v in flags.items() if v is not None}}
@@ -252,5 +253,6 @@ def restore(meta: dict, V, comm) -> SolverState:
         adaptation=None if meta["adaptation"] is None else float(meta["adaptation"]),
         model_gnorm0=None if meta["model_gnorm0"] is None else float(meta["model_gnorm0"]),
         active=flags("active"), held=flags("held"),
+        held_only=bool(meta.get("held_only", False)),  # absent before the consistent rule
         exact_hessian=meta.get("exact_hessian"),  # absent in checkpoints before the hybrid
     )

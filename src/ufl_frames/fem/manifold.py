@@ -117,18 +117,19 @@ class FrameManifold:
     # --- tangent spaces ----------------------------------------------------------------
 
     def tangent_basis(self, rows: np.ndarray, gradient: np.ndarray | None = None,
-                      held: np.ndarray | None = None) -> np.ndarray:
+                      held: np.ndarray | None = None, only_held: bool = False) -> np.ndarray:
         """Orthonormal basis (N, 5, 3) of the pointwise tangent space at ``rows`` (on 𝓜).
 
         Columns e_s (total length), e_d (length difference), rotation; zero where the
         direction is absent: rotation at fixed-orientation vertices, e_d for isotropic
         frames and for frames on the aspect bound that ``gradient`` pushes outwards
         (see :func:`ufl_frames.frames2d.aspect.active_bound`; ``held``: rows kept on the
-        bound whatever the gradient). Same in q and in x.
+        bound whatever the gradient; with ``only_held`` the held rows alone are active).
+        Same in q and in x.
         """
         c = self.constraints
         basis = odeco.tangent_basis(rows, max_aspect=c.max_aspect, gradient=gradient,
-                                    on_variety=True, held=held)
+                                    on_variety=True, held=held, only_held=only_held)
         basis[c.boundary, :, 2] = 0.0  # orientation held: no rotation
         if c.isotropic:
             basis[:, :, 1] = 0.0
@@ -137,21 +138,25 @@ class FrameManifold:
     def tangent_project(self, rows: np.ndarray, dq: np.ndarray,
                         gradient: np.ndarray | None = None,
                         held: np.ndarray | None = None,
-                        basis: np.ndarray | None = None) -> np.ndarray:
+                        basis: np.ndarray | None = None, only_held: bool = False) -> np.ndarray:
         """Step 2 of note §3: the pointwise tangent part of ``dq`` at ``rows``; the active
         aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)
-        and ``held``, unless ``basis`` (:meth:`tangent_basis` at ``rows``) is given."""
+        and ``held`` (``only_held``: see :meth:`tangent_basis`), unless ``basis``
+        (:meth:`tangent_basis` at ``rows``) is given."""
         if basis is None:
-            basis = self.tangent_basis(rows, dq if gradient is None else gradient, held)
+            basis = self.tangent_basis(rows, dq if gradient is None else gradient, held,
+                                       only_held)
         return np.einsum("nik,nk->ni", basis, np.einsum("nik,ni->nk", basis, dq))
 
     def riemannian_gradient(self, rows: np.ndarray, gradient_x: np.ndarray,
-                            held: np.ndarray | None = None) -> np.ndarray:
+                            held: np.ndarray | None = None,
+                            only_held: bool = False) -> np.ndarray:
         """grad f on 𝓜 at ``rows`` from the Euclidean gradient ``gradient_x`` = ∂f/∂x (local
         rows): pointwise tangent part, then the component along x removed (the sphere's
-        tangent). Owned rows, in x."""
+        tangent). Owned rows, in x. ``held``, ``only_held``: the aspect bound's active set
+        as in :meth:`tangent_basis` (``only_held`` with no row held: no bound at all)."""
         n = self.owned
-        tangent = self.tangent_project(rows, gradient_x, held=held)[:n]
+        tangent = self.tangent_project(rows, gradient_x, held=held, only_held=only_held)[:n]
         x = self.to_x(rows)
         return tangent - (self.inner(tangent, x) / self.inner(x, x)) * x
 
@@ -183,8 +188,10 @@ class FrameManifold:
         # the sphere's (radial) at a critical point, counted in sphere_curvature.
         normal = gradient_q - np.einsum("nia,na->ni", basis,
                                         np.einsum("nia,ni->na", basis, gradient_q))
+        # the active set the basis was made with (e_d absent), whatever decided it
+        active = None if c.isotropic else np.linalg.norm(basis[:, :, 1], axis=1) == 0
         curvature = odeco.tangent_curvature(rows, normal, c.max_aspect, c.isotropic,
-                                            active_gradient=gradient_x)
+                                            active_gradient=gradient_x, active=active)
         curvature[c.boundary] = 0.0
         blocks = np.einsum("nia,nab,njb->nij", basis, curvature, basis)[:n]
         return blocks / c.weights[:n, None, None]

@@ -61,6 +61,9 @@ class FrameProblem:
     #: decides), set by a solver for the current iterate (the Newton model's anti-zigzag
     #: rule); :meth:`riemannian_gradient` and the Newton model's tangent basis use it.
     held: np.ndarray | None = field(default=None, repr=False)
+    #: With it, :attr:`held` is the active set itself (rows on the bound): the gradient
+    #: adds none (the Newton model's ``-frames_active_consistent`` rule).
+    held_only: bool = field(default=False, repr=False)
     #: Counts the changes of q made here (retractions); keys the cached evaluation.
     _version: int = field(default=0, repr=False)
     _evaluated: tuple | None = field(default=None, repr=False)  # (version, Evaluation)
@@ -126,11 +129,13 @@ class FrameProblem:
         changes, whatever was evaluated in between: q is then put back as it was, not
         retracted again (R(R(q)) is R(q) only up to round-off)."""
         self._tracking, self._synced, self._evaluated, self.held = True, None, None, None
+        self.held_only = False
         self._kept = None
         try:
             yield self
         finally:
             self._tracking, self._synced, self._evaluated, self.held = False, None, None, None
+            self.held_only = False
             self._kept = None
 
     def _mark_synced(self, x: PETSc.Vec) -> None:
@@ -207,7 +212,7 @@ class FrameProblem:
         """g ← the gradient of H on 𝓜 at q, in the scaled unknowns x (steps 1–2); returns H."""
         evaluation = self.evaluation()
         g.getArray()[:] = self.manifold.riemannian_gradient(
-            self.rows, evaluation.gradient_x, held=self.held).ravel()
+            self.rows, evaluation.gradient_x, held=self.held, only_held=self.held_only).ravel()
         return evaluation.energy
 
 

@@ -65,20 +65,27 @@ def clamp_aspect(s, d, max_aspect: float):
     return np.where(outside, s_ray, s), np.where(outside, sign * k * s_ray, d)
 
 
-def active_bound(s, d, gradient, e_s, e_d, max_aspect: float, held=None):
+def active_bound(s, d, gradient, e_s, e_d, max_aspect: float, held=None,
+                 only_held: bool = False):
     """Frames held on the bound: on it (|d| = κ s) and pushed outwards by ``gradient``.
 
     Along the steepest descent −g, Δs = −g·e_s/|e_s|² and Δd = −g·e_d/|e_d|² (e_s, e_d
     unnormalised, (N, 5)); the bound sign·d − κ s ≤ 0 is violated to first order when
     sign·Δd − κ Δs ≥ 0. A gradient pointing inwards releases the frame (an active set).
     ``held`` (N,) marks frames kept on the bound whatever the gradient says, while they
-    are on it (the solver's anti-zigzag rule). Returns ``(active, sign, κ)``: the mask
-    (N,), the sign of d and the slope, with which the direction along the bound is
-    e_s + sign κ e_d.
+    are on it (the solver's anti-zigzag rule); with ``only_held`` they are the active set
+    itself (where on the bound) and the gradient decides nothing (the rule that decides
+    the set with the Newton step, ``GaussNewtonModel._consistent_active_set``). Returns
+    ``(active, sign, κ)``: the mask (N,), the sign of d and the slope, with which the
+    direction along the bound is e_s + sign κ e_d.
     """
     k = kappa(max_aspect)
     sign = np.where(d < 0, -1.0, 1.0)
     on_bound = np.abs(d) >= k * s * (1 - _ON_BOUND_RTOL)
+    if only_held:
+        if held is None:
+            raise ValueError("only_held needs the held mask")
+        return on_bound & np.asarray(held, dtype=bool), sign, k
     ds = -np.einsum("ni,ni->n", gradient, e_s) / ES_NORM2
     dd = -np.einsum("ni,ni->n", gradient, e_d) / ED_NORM2
     outward = sign * dd - k * ds >= 0

@@ -212,7 +212,8 @@ def _tangent_project_rows(q, dq):
 
 
 def tangent_basis(
-    q, max_aspect: float | None = None, gradient=None, on_variety: bool = False, held=None
+    q, max_aspect: float | None = None, gradient=None, on_variety: bool = False, held=None,
+    only_held: bool = False,
 ) -> np.ndarray:
     """Orthonormal basis (N, 5, 3) of the tangent space of the variety at the frames nearest q.
 
@@ -225,7 +226,8 @@ def tangent_basis(
     aspect further out lose their e_d column, and e_s becomes the direction along the
     bound (an active set: a gradient pointing inwards releases the frame).
     ``held`` (N,) bool: frames on the bound that stay active whatever the gradient (see
-    :func:`ufl_frames.frames2d.aspect.active_bound`). ``on_variety`` promises that q lies
+    :func:`ufl_frames.frames2d.aspect.active_bound`); with ``only_held`` they are the
+    active set (on the bound), whatever the gradient. ``on_variety`` promises that q lies
     on the variety: the frame is then read off q directly (about 3x faster) instead of by
     the closest-point search.
     """
@@ -236,7 +238,8 @@ def tangent_basis(
     gradient = _check_q(gradient, "gradient")
     held = np.zeros(q.shape[0], bool) if held is None else np.asarray(held, dtype=bool)
     return _by_chunks(
-        lambda a, g, k: _tangent_basis_rows(a, max_aspect, g, on_variety, k), q, gradient, held
+        lambda a, g, k: _tangent_basis_rows(a, max_aspect, g, on_variety, k, only_held),
+        q, gradient, held,
     )
 
 
@@ -260,7 +263,8 @@ def _length_directions(c4, s4):
     return e_s, e_d, c2, s2
 
 
-def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False, held=None):
+def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False, held=None,
+                        only_held=False):
     if on_variety:
         s, d, c4, s4 = _parameters_on_variety(q)
     else:
@@ -269,7 +273,8 @@ def _tangent_basis_rows(q, max_aspect, gradient, on_variety=False, held=None):
     zero = np.zeros_like(s)
     dq_dt = np.stack([zero, -d * s2, d * c2, -s * s4 / 2, s * c4 / 2], axis=1)
     if max_aspect is not None:
-        active, sign, kappa = active_bound(s, d, gradient, e_s, e_d, max_aspect, held)
+        active, sign, kappa = active_bound(s, d, gradient, e_s, e_d, max_aspect, held,
+                                           only_held)
         active = active[:, None]
         e_s = np.where(active, e_s + (sign * kappa)[:, None] * e_d, e_s)
         e_d = np.where(active, 0.0, e_d)
@@ -294,7 +299,8 @@ def pushed_off_bound(q, direction, max_aspect: float) -> np.ndarray:
 
 
 def tangent_curvature(
-    q, gradient, max_aspect: float | None = None, isotropic: bool = False, active_gradient=None
+    q, gradient, max_aspect: float | None = None, isotropic: bool = False, active_gradient=None,
+    active=None,
 ) -> np.ndarray:
     """Second-order term of the chart: Σ_k g_k ∂²q_k in the basis of :func:`tangent_basis`.
 
@@ -305,7 +311,8 @@ def tangent_curvature(
     rotation couples: ∂²q/∂s∂t = e_s', ∂²q/∂d∂t = e_d', ∂²q/∂t² = s e_s'' + d e_d''.
     With the normal part of g this is the second fundamental form of the variety. The
     aspect-bound active set is decided by ``active_gradient`` (default ``gradient``), as
-    in :func:`tangent_basis`.
+    in :func:`tangent_basis`, or given as ``active`` (N,) bool (frames on the bound only
+    count), which is how a basis with a held set is matched.
     """
     q = _check_q(q)
     gradient = _check_q(gradient, "gradient")
@@ -320,7 +327,8 @@ def tangent_curvature(
     mixed_s, keep_d = e_s1, ~np.full(s.shape, isotropic)
     col0 = e_s
     if max_aspect is not None and not isotropic:
-        active, sign, kappa = active_bound(s, d, active_gradient, e_s, e_d, max_aspect)
+        active, sign, kappa = active_bound(s, d, active_gradient, e_s, e_d, max_aspect,
+                                           held=active, only_held=active is not None)
         col0 = np.where(active[:, None], e_s + (sign * kappa)[:, None] * e_d, e_s)
         mixed_s = np.where(active[:, None], e_s1 + (sign * kappa)[:, None] * e_d1, e_s1)
         keep_d &= ~active

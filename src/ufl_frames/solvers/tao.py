@@ -37,8 +37,9 @@ on round-off. TAO types:
   sparse Cholesky factorisation in reduced tangent coordinates, 3 unknowns per vertex,
   see :func:`newton_pc_options`); the Gauss–Newton
   damping adapts to the line search (``-frames_gn_adapt``) and the aspect bound's active
-  set is held until releasing it pays (``-frames_active_release η``, 0 to turn off), or,
-  for ``nls`` with ``-frames_active_consistent``, decided with the Newton step itself;
+  set is decided with the Newton step itself (``nls``: ``-frames_active_consistent``, on
+  by default), otherwise held until releasing it pays
+  (``-frames_active_release η``, 0 to turn off);
   with the aspect bound, ``nls`` backtracks (``-tao_ls_type armijo``, see
   :data:`BOUNDED_OPTIONS`);
 * ``lmvm``: L-BFGS, in the lumped-L² metric of the scaled unknowns;
@@ -194,7 +195,9 @@ class SolverState:
     TAO's relative test (``-tao_gttol``) divides by; with a Newton model, its damping
     state (``adaptation``, ``model_gnorm0``), the last step length (``step``), the
     aspect bound's active set of the last Newton step (``active``) and the rows it held
-    there (``held``; None: none), owned and ghost rows, and whether the model was the
+    there (``held``; None: none; ``held_only``: they were the whole active set, see
+    :attr:`~ufl_frames.fem.problem.FrameProblem.held_only`), owned and ghost rows, and
+    whether the model was the
     exact Hessian there (``exact_hessian``: the hybrid model may have switched).
     """
 
@@ -208,6 +211,7 @@ class SolverState:
     model_gnorm0: float | None = None
     active: np.ndarray | None = field(default=None, repr=False)
     held: np.ndarray | None = field(default=None, repr=False)
+    held_only: bool = False
     exact_hessian: bool | None = None
 
     @property
@@ -407,6 +411,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             state.exact_hessian = model.exact
             state.active = None if model.active is None else model.active.copy()
             state.held = None if problem.held is None else problem.held.copy()
+            state.held_only = problem.held_only
         return state
 
     tao_base = 0 if resume is None else resume.tao_iterations
@@ -425,6 +430,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             problem.rows[: problem.owned] = resume.rows
             problem.q.x.scatter_forward()
             problem.held = None if resume.held is None else resume.held.copy()
+            problem.held_only = resume.held_only and problem.held is not None
         problem.write_x(x, keep=True)
         g = x.duplicate()
         owned.callback(g.destroy)
@@ -438,10 +444,11 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
                     and opts.getString(f"{prefix}pc_type", "") == "python"
                     and opts.getString(f"{prefix}pc_python_type", "").endswith(
                         "ReducedFactorPC"))
-            # -frames_active_consistent (nls, opt-in): the steps are checked against the
-            # aspect bound (GaussNewtonModel._consistent_active_set) instead of holding the
-            # active set; fewer Newton steps, but more factorisations (benchmarks/README).
-            consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", False)
+            # -frames_active_consistent (nls, the default): the active set is decided with
+            # the Newton step (GaussNewtonModel._consistent_active_set) instead of held and
+            # released by the gradient; Newton steps that no longer grow with the mesh,
+            # for more factorisations per step (benchmarks/README).
+            consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", True)
             model = owned.enter_context(GaussNewtonModel(
                 problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
                 damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
