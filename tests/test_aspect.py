@@ -254,6 +254,13 @@ def unit_e_d(q):
     return odeco.tangent_basis(q)[:, :, 1]
 
 
+def length_gradient(q, outward):
+    """A gradient along e_d whose descent pushes the frames of ``outward`` (N,) bool further
+    out of the bound (|d| grows) and the others back in."""
+    d_sign = np.where(odeco.q_to_frames(q)[0] @ np.array([1.0, -1.0]) < 0, -1.0, 1.0)
+    return (np.where(outward, -1.0, 1.0) * d_sign)[:, None] * unit_e_d(q)
+
+
 def check_orthonormal(basis):
     gram = np.einsum("nik,nil->nkl", basis, basis)
     nonzero = np.linalg.norm(basis, axis=1) > 0
@@ -316,10 +323,8 @@ def test_tangent_basis_mixed_rows():
     """Active and released rows side by side: each row only depends on its own gradient."""
     rng = np.random.default_rng(13)
     q = frames_on_bound(rng, 100, 4.0)
-    d_sign = np.where(odeco.q_to_frames(q)[0] @ np.array([1.0, -1.0]) < 0, -1.0, 1.0)
-    e_d = unit_e_d(q)
     outward = rng.random(100) < 0.5
-    gradient = np.where(outward, -1.0, 1.0)[:, None] * d_sign[:, None] * e_d
+    gradient = length_gradient(q, outward)
     basis = odeco.tangent_basis(q, max_aspect=4.0, gradient=gradient)
     check_orthonormal(basis)
     assert np.all(basis[outward, :, 1] == 0.0)
@@ -363,16 +368,14 @@ def test_tangent_basis_only_held_is_the_given_set():
     rng = np.random.default_rng(17)
     n = 100
     q = frames_on_bound(rng, n, 4.0)
-    d_sign = np.where(odeco.q_to_frames(q)[0] @ np.array([1.0, -1.0]) < 0, -1.0, 1.0)
-    e_d = unit_e_d(q)
     outward = rng.random(n) < 0.5
-    gradient = np.where(outward, -1.0, 1.0)[:, None] * d_sign[:, None] * e_d
+    gradient = length_gradient(q, outward)
     held = rng.random(n) < 0.5
     assert (held & ~outward).any() and (~held & outward).any()
     basis = odeco.tangent_basis(q, max_aspect=4.0, gradient=gradient, held=held,
                                 only_held=True)
     check_orthonormal(basis)
-    bound = odeco.tangent_basis(q, max_aspect=4.0, gradient=-d_sign[:, None] * e_d)
+    bound = odeco.tangent_basis(q, max_aspect=4.0, gradient=length_gradient(q, True))
     assert np.array_equal(basis[held], bound[held])  # the bound's basis, as if pushed out
     assert np.array_equal(basis[~held], odeco.tangent_basis(q[~held]))
     # the union semantics (the default) would have made the outward unheld frames active
@@ -394,10 +397,8 @@ def test_tangent_curvature_follows_a_given_active_set():
     rng = np.random.default_rng(18)
     n = 100
     q = frames_on_bound(rng, n, 4.0)
-    d_sign = np.where(odeco.q_to_frames(q)[0] @ np.array([1.0, -1.0]) < 0, -1.0, 1.0)
-    e_d = unit_e_d(q)
     mask = rng.random(n) < 0.5
-    deciding = np.where(mask, -1.0, 1.0)[:, None] * d_sign[:, None] * e_d  # outward where mask
+    deciding = length_gradient(q, mask)  # outward where mask
     gradient = rng.standard_normal((n, 5))
     expected = odeco.tangent_curvature(q, gradient, 4.0, active_gradient=deciding)
     given = odeco.tangent_curvature(q, gradient, 4.0, active_gradient=-deciding, active=mask)
