@@ -120,6 +120,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)
     krylov = result.krylov_iterations or []
     newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
+    # factorisations per Newton step (the active-set rounds: more than one)
+    faces = [e["factorisations"] for e in result.history[1:] if "factorisations" in e]
     return {
         "case": case, "h": h, "ranks": comm.size,
         "triangles": int(domain.num_cells), "vertices": int(domain.num_vertices),
@@ -128,6 +130,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         "iterations": result.iterations, "converged_reason": result.converged_reason,
         "ksp_mean": sum(newton) / len(newton) if newton else None,
         "ksp_max": max(newton) if newton else None, "ksp_per_step": krylov,
+        "factorisations_mean": sum(faces) / len(faces) if faces else None,
         "H_final": result.H_final, "peak_rss_mb": peak_kb / 1024,
         "singularities": sorted(s["index"] for s in field.singularities),
         "quads": quad_record, "levels": field.levels,
@@ -196,20 +199,23 @@ def _indices(values) -> str:
 
 def print_table(records) -> None:
     head = ("| case | h | triangles | ranks | mesh s | mbo s | solve s | write s | total s "
-            "| Newton its | KSP mean | KSP max | peak MB/rank | final H | reason | singularities |")
+            "| Newton its | KSP mean | KSP max | factorisations per step | peak MB/rank "
+            "| final H | reason | singularities |")
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for r in records:
         if r["status"] != "ok":
             print(f"| {r['case']} | {r['h']:.4g} | - | {r['ranks']} | {r['status']} "
-                  f"{r.get('error', '')} |" + " |" * 11)
+                  f"{r.get('error', '')} |" + " |" * 12)
             continue
         s = r["stages"]
         mean = "-" if r["ksp_mean"] is None else f"{r['ksp_mean']:.0f}"
         peak = "-" if r["ksp_max"] is None else str(r["ksp_max"])
+        faces = r.get("factorisations_mean")
+        faces = "-" if faces is None else f"{faces:.2f}"
         print(f"| {r['case']} | {r['h']:.4g} | {r['triangles']} | {r['ranks']} "
               f"| {s['mesh']:.2f} | {s['mbo']:.2f} | {s['solve']:.2f} | {s['write']:.2f} "
-              f"| {r['total']:.1f} | {r['iterations']} | {mean} | {peak} "
+              f"| {r['total']:.1f} | {r['iterations']} | {mean} | {peak} | {faces} "
               f"| {r['peak_rss_mb']:.0f} | {r['H_final']:.4e} | {r['converged_reason']} "
               f"| {_indices(r['singularities'])} |")
 

@@ -69,3 +69,6 @@ def test_the_rounds_release_by_the_multiplier_and_settle(monkeypatch):
     assert sum(p for r in rounds for _, p in r) > 0, "no pushed frame held"
     assert all(released == 0 for r in rounds for released, _ in r[1:])  # first round only
     assert len(after) >= len(rounds) // 2 and all(count == 0 for count in after), after
+    faces = [entry["factorisations"] for entry in result.history[1:]]
+    assert all(1 <= count <= CONSISTENT_ROUNDS + 1 for count in faces)
+    assert sum(faces) == sum(max(len(r), 1) for r in rounds[: len(faces)])

@@ -641,7 +641,9 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
 
     def tao_monitor(e):  # interrupts are taken by keep(), called just before
         say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
-            + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else ""))
+            + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else "")
+            + (f"  factorisations {e['factorisations']}"
+               if e.get("factorisations", 1) > 1 else ""))
 
     def keep(state, V=None):
         """Save ``state`` (of the field on ``V``, default the field's) every

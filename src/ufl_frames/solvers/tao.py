@@ -157,7 +157,10 @@ class SolveResult:
     ``ntr`` reports too, are left out). ``iterations`` counts those steps; it can
     exceed TAO's own count by one (``nls`` and ``bncg`` take a first step that TAO
     numbers 0 again). With a Newton model (``nls``, ``ntr``, ...) each entry also has
-    ``ksp_its``: the Krylov iterations spent since the previous entry.
+    ``ksp_its``: the Krylov iterations spent since the previous entry, and
+    ``factorisations``: how many faces of the aspect bound the Newton step that led there
+    set up its preconditioner for (more than one: the rounds of
+    ``-frames_active_consistent``, see ``GaussNewtonModel._consistent_active_set``).
     """
 
     history: list[dict]
@@ -394,6 +397,8 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
         if model is not None:  # Krylov iterations of the Newton step(s) that led here
             entry["ksp_its"] = linear_iterations[0] - linear_iterations[1]
             linear_iterations[1] = linear_iterations[0]
+            # faces factorised for it: one, or one per round of the consistent rule
+            entry["factorisations"] = max(len(model.bound_rounds), 1)
         history.append(entry)
         if checkpoint is not None:
             checkpoint(snapshot(tao, float(step)))
