@@ -6,7 +6,7 @@ only that folder, a completed one removes it (:class:`ufl_frames.io.OutputFolder
 ``ours``). The file, written by rank 0 as a whole (a temporary file renamed over the
 last), holds:
 
-* ``q``, ``active``, ``held``: the iterate and the Newton model's active sets
+* ``q``, ``active``, ``held``, ``released``: the iterate and the Newton model's active sets
   (:class:`ufl_frames.solvers.SolverState`) per vertex, in the mesh's input node order:
   the order of rank 0's Gmsh mesh, which meshing the same geometry with the same
   options gives again, whatever the number of processes;
@@ -110,7 +110,7 @@ class CheckpointFolder:
         q = _gather(V, state.rows, self.comm)
         n = V.dofmap.index_map.size_local
         flags = {}
-        for name in ("active", "held"):
+        for name in ("active", "held", "released"):
             array = getattr(state, name)
             present = self.comm.allreduce(array is not None)
             flags[name] = _gather(V, np.zeros(n, np.int8) if array is None
@@ -173,7 +173,8 @@ class CheckpointFolder:
 
 def read(out, comm) -> dict:
     """The checkpoint in the output folder ``out``: its ``meta`` dict on every rank, its
-    arrays (``q``, ``active``, ``held``) under ``"arrays"`` on rank 0 (collective).
+    arrays (``q``, ``active``, ``held``, ``released``) under ``"arrays"`` on rank 0
+    (collective).
     Raises :class:`CheckpointError` on every rank when there is none or it is unusable."""
     out = Path(out)
     result, error = None, None
@@ -252,7 +253,7 @@ def restore(meta: dict, V, comm) -> SolverState:
         step=float(meta["step"]),
         adaptation=None if meta["adaptation"] is None else float(meta["adaptation"]),
         model_gnorm0=None if meta["model_gnorm0"] is None else float(meta["model_gnorm0"]),
-        active=flags("active"), held=flags("held"),
+        active=flags("active"), held=flags("held"), released=flags("released"),
         held_only=bool(meta.get("held_only", False)),  # absent before the consistent rule
         exact_hessian=meta.get("exact_hessian"),  # absent in checkpoints before the hybrid
     )

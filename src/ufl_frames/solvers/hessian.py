@@ -51,9 +51,11 @@ RELEASE_RATIO = 1.0
 #: :meth:`GaussNewtonModel._consistent_active_set` (measured at 10⁵ triangles: 2 rounds
 #: as few Newton steps as 4 or 6, with fewer factorisations).
 CONSISTENT_ROUNDS = 2
-#: … and none where the step releases no frame and pushes no more than this fraction of
-#: the held frames off the bound (which the retraction then clamps): at 10⁵ triangles
-#: 123.9 s against 133.8 s with 0, the same Newton steps and H.
+#: … and none where the step pushes no more than this fraction of the held frames off the
+#: bound (which the retraction then clamps; its releases wait for the next Newton step):
+#: at 10⁵ triangles 123.9 s against 133.8 s with 0, the same Newton steps and H (with
+#: releases at once, a round then being run for any release); with the releases left to
+#: the next step 100.0 s (benchmarks/README).
 CONSISTENT_TOLERANCE = 0.05
 
 
@@ -169,6 +171,7 @@ class GaussNewtonModel:
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.consistent = consistent  # see _consistent_active_set
         self.bound_rounds = []  # (released, pushed) per round of the last step
+        self.released = None  # the releases the last step left to the next one
         self.switch = None if exact else switch  # see _switch
         self.bound_steps = bound_steps  # see _reached_bound
         self.lean = lean
@@ -366,13 +369,15 @@ class GaussNewtonModel:
         self.reduced_matrix.setDiagonal(self.absent, addv=PETSc.InsertMode.ADD_VALUES)
 
     def resume(self, adaptation: float, gnorm0: float | None, active, step: float,
-               exact: bool | None = None) -> None:
+               exact: bool | None = None, released=None) -> None:
         """Go on from an earlier solve's state (:class:`ufl_frames.solvers.SolverState`):
-        its damping factor and reference gradient, the active set of its last assembly,
-        the length of its last step (which a new TAO does not report) and, for the hybrid
-        model, whether it had switched to the exact Hessian."""
+        its damping factor and reference gradient, the active set of its last assembly and
+        the releases it left to the next step (:attr:`released`), the length of its last
+        step (which a new TAO does not report) and, for the hybrid model, whether it had
+        switched to the exact Hessian."""
         self.adaptation, self.gnorm0 = adaptation, gnorm0
         self.active = None if active is None else np.asarray(active, dtype=bool).copy()
+        self.released = None if released is None else np.asarray(released, dtype=bool).copy()
         self._resumed_step = step
         if exact and self.switch is not None and not self.exact:
             self._use_exact()
@@ -441,7 +446,8 @@ class GaussNewtonModel:
     def _start_active_set(self, g: PETSc.Vec, free: np.ndarray | None) -> None:
         """The face a Newton step of :meth:`_consistent_active_set` starts from: the frames
         the gradient holds on the bound and those the last step ended with (while still
-        on it), held exactly (:attr:`FrameProblem.held_only`); ``g`` is put on that face.
+        on it), less those the last step released without a round (:attr:`released`),
+        held exactly (:attr:`FrameProblem.held_only`); ``g`` is put on that face.
         ``free``: :meth:`_free_basis` (None: computed here)."""
         problem = self.problem
         problem.held, problem.held_only = None, False
@@ -450,7 +456,11 @@ class GaussNewtonModel:
         if free is None:
             free = problem.manifold.tangent_basis(problem.rows,
                                                   problem.evaluation().gradient_x)
-        problem.held, problem.held_only = _on_bound(free) | self.active, True
+        held = _on_bound(free) | self.active
+        if self.released is not None:
+            held &= ~self.released
+            self.released = None
+        problem.held, problem.held_only = held, True
         problem.riemannian_gradient(g)
 
     def _consistent_active_set(self, ksp: PETSc.KSP, H: PETSc.Mat, P: PETSc.Mat,
@@ -477,11 +487,15 @@ class GaussNewtonModel:
         factorised and solved; the first round releases the held frames whose multiplier
         is negative and holds the frames δ pushes off the bound, later rounds (at most
         :data:`CONSISTENT_ROUNDS` factorisations more, none for a few pushed frames:
-        :data:`CONSISTENT_TOLERANCE`) only hold pushed ones, so the set settles. ``g``
-        follows the face. :attr:`bound_rounds` records (released, pushed) per round of
-        the last step. On the non-isotropic piano the finest level's Newton steps no
-        longer grow with the mesh: 37 / 28 / 29 at 10⁴ / 3·10⁴ / 10⁵ triangles, against
-        58 / 36 / 60 with the hold-and-release rule (benchmarks/README).
+        :data:`CONSISTENT_TOLERANCE`) only hold pushed ones, so the set settles. Where no
+        round follows the first, its releases are left to the next Newton step
+        (:attr:`released`, see :meth:`_start_active_set`): a refactorisation for a few
+        released frames cost more than the step they wait (at 10⁵ triangles 100.0 s
+        against 118.3 s of solve, the same steps and H). ``g`` follows the face.
+        :attr:`bound_rounds` records (released, pushed) per round of the last step. On the
+        non-isotropic piano the finest level's Newton steps no longer grow with the mesh:
+        37 / 28 / 29 at 10⁴ / 3·10⁴ / 10⁵ triangles, against 58 / 36 / 60 with the
+        hold-and-release rule (benchmarks/README).
         """
         problem = self.problem
         pc = ksp.getPC()
@@ -514,8 +528,13 @@ class GaussNewtonModel:
                 if counts == (0, 0) or round_ == CONSISTENT_ROUNDS:
                     break
                 held_count = comm.allreduce(int(np.count_nonzero(self.active[:n])), op=MPI.SUM)
-                if counts[0] == 0 and counts[1] <= CONSISTENT_TOLERANCE * held_count:
-                    break  # a few frames clamped by the retraction cost less than a round
+                if counts[1] <= CONSISTENT_TOLERANCE * held_count:
+                    # a few frames clamped by the retraction cost less than a round, and
+                    # the released frames can wait for the next step's face
+                    if counts[0]:
+                        self.released = np.zeros(rows.shape[0], dtype=bool)
+                        self.released[:n] = released
+                    break
                 held = held.copy()
                 held[:n] = (held[:n] & ~released) | pushed
                 problem.held, problem.held_only = held, True

@@ -199,9 +199,11 @@ class SolverState:
     state (``adaptation``, ``model_gnorm0``), the last step length (``step``), the
     aspect bound's active set of the last Newton step (``active``) and the rows it held
     there (``held``; None: none; ``held_only``: they were the whole active set, see
-    :attr:`~ufl_frames.fem.problem.FrameProblem.held_only`), owned and ghost rows, and
-    whether the model was the
-    exact Hessian there (``exact_hessian``: the hybrid model may have switched).
+    :attr:`~ufl_frames.fem.problem.FrameProblem.held_only`), the releases it left to the
+    next step (``released``, see
+    :attr:`~ufl_frames.solvers.hessian.GaussNewtonModel.released`), owned and ghost rows,
+    and whether the model was the exact Hessian there (``exact_hessian``: the hybrid model
+    may have switched).
     """
 
     rows: np.ndarray = field(repr=False)
@@ -215,6 +217,7 @@ class SolverState:
     active: np.ndarray | None = field(default=None, repr=False)
     held: np.ndarray | None = field(default=None, repr=False)
     held_only: bool = False
+    released: np.ndarray | None = field(default=None, repr=False)
     exact_hessian: bool | None = None
 
     @property
@@ -417,6 +420,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             state.active = None if model.active is None else model.active.copy()
             state.held = None if problem.held is None else problem.held.copy()
             state.held_only = problem.held_only
+            state.released = None if model.released is None else model.released.copy()
         return state
 
     tao_base = 0 if resume is None else resume.tao_iterations
@@ -467,7 +471,8 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
                         if hessian == "hybrid" else None)))
             if resume is not None and resume.adaptation is not None:
                 model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
-                             resume.step, exact=resume.exact_hessian)
+                             resume.step, exact=resume.exact_hessian,
+                             released=resume.released)
         tao = PETSc.TAO().create(comm)
         owned.callback(tao.destroy)
         tao.setOptionsPrefix(options_prefix)
