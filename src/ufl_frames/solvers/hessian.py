@@ -494,7 +494,7 @@ class GaussNewtonModel:
         against 118.3 s of solve, the same steps and H). ``g`` follows the face.
         :attr:`bound_rounds` records (released, pushed) per round of the last step. On the
         non-isotropic piano the finest level's Newton steps no longer grow with the mesh:
-        37 / 28 / 29 at 10⁴ / 3·10⁴ / 10⁵ triangles, against 58 / 36 / 60 with the
+        36 / 27 / 29 at 10⁴ / 3·10⁴ / 10⁵ triangles, against 58 / 36 / 60 with the
         hold-and-release rule (benchmarks/README).
         """
         problem = self.problem
