@@ -52,10 +52,9 @@ RELEASE_RATIO = 1.0
 #: as few Newton steps as 4 or 6, with fewer factorisations).
 CONSISTENT_ROUNDS = 2
 #: … and none where the step pushes no more than this fraction of the held frames off the
-#: bound (which the retraction then clamps; its releases wait for the next Newton step):
-#: at 10⁵ triangles 123.9 s against 133.8 s with 0, the same Newton steps and H (with
-#: releases at once, a round then being run for any release); with the releases left to
-#: the next step 100.0 s (benchmarks/README).
+#: bound: those the retraction clamps, and the step's releases wait for the next Newton
+#: step (10⁵ triangles: 100.0 s of solve; 118.3 s when a release always ran a round;
+#: a round for every pushed frame cost more at every size, benchmarks/README).
 CONSISTENT_TOLERANCE = 0.05
 
 
