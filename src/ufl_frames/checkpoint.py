@@ -214,15 +214,19 @@ _COMPARED = {
     "max_triangles": "--max-triangles",
     "max_aspect": "--max-aspect",
     "free_singularities": "--free-singularities",
+    "pin_radius": "--pin-radius",
     "max_it": "--max-it",
     "petsc_options": "the PETSc options",
 }
+
+#: Run arguments older checkpoints do not record, and the value those runs had.
+_ADDED_LATER = {"pin_radius": 0.0}
 
 
 def check_run(meta: dict, run: dict, out) -> None:
     """Raise :class:`CheckpointError` if the checkpoint ``meta`` is of a run with other
     arguments than ``run`` (the first that differs is named)."""
-    saved = meta.get("run", {})
+    saved = {**_ADDED_LATER, **meta.get("run", {})}
     for key, label in _COMPARED.items():
         if saved.get(key) != run.get(key):
             was, now = saved.get(key), run.get(key)

@@ -111,6 +111,16 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
+
+
 def _levels(text: str):
     """``--levels``: 'auto' or a whole number from 1 to MAX_LEVELS."""
     if text == "auto":
@@ -203,6 +213,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "
                        "triangles)")
+    solve.add_argument("--pin-radius", type=_non_negative_float, default=0.0, metavar="R",
+                       help="also hold the cross orientation at every vertex closer than R to "
+                       "a singular triangle, on every level of --levels (default 0: the "
+                       "triangles' vertices only, which a fine mesh can escape by creating "
+                       "a pair of singularities next to them)")
     solve.add_argument("--levels", type=_levels, default="auto", metavar="L",
                        help="nested iteration over L meshes: MBO and a solve on the mesh of "
                        "size 2^(L-1) times the requested one, then each finer mesh from the "
@@ -394,6 +409,15 @@ def _check_parameters(mesh_size, max_it) -> None:
         raise InputError(f"max-it must be a positive integer at most {MAX_INT}, got {max_it!r}")
 
 
+def _check_pin_radius(pin_radius, free_singularities: bool) -> None:
+    real = isinstance(pin_radius, (int, float)) and not isinstance(pin_radius, bool)
+    if not (real and math.isfinite(pin_radius) and pin_radius >= 0):
+        raise InputError(f"pin radius must be a number >= 0, got {pin_radius!r}")
+    if pin_radius > 0 and free_singularities:
+        raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
+                         "with --free-singularities")
+
+
 def auto_levels(num_cells: int) -> int:
     """The levels of ``--levels auto`` for a finest mesh of ``num_cells`` triangles: as
     many halvings of the mesh size as keep the coarsest mesh at :data:`NESTED_COARSEST`
@@ -440,6 +464,7 @@ def run_solve(
     resume=None,
     levels: int | str = "auto",
     nested_meshes: bool = False,
+    pin_radius: float = 0.0,
 ) -> dict:
     """Mesh → MBO → TAO → singularities (→ with ``param``, the map (U, V) of
     :meth:`~ufl_frames.pipeline.FrameField.parametrise`; with ``quads``, the quad mesh of
@@ -481,12 +506,14 @@ def run_solve(
     out = default_output_folder(geometry) if out is None else Path(out)
     _check_parameters(mesh_size, max_it)
     _check_levels(levels, geometry, conformal)
+    _check_pin_radius(pin_radius, free_singularities)
     problem = petsc_option_problem(user_options)
     if problem is not None:
         raise InputError(problem)
     run = _run_record(geometry, comm, isotropic=isotropic, mesh_size=mesh_size,
                       size_factor=size_factor, max_triangles=max_triangles,
                       max_aspect=max_aspect, free_singularities=free_singularities,
+                      pin_radius=float(pin_radius),
                       max_it=max_it, conformal=conformal, levels=levels,
                       nested_meshes=nested_meshes, petsc_options=user_options)
     saved = None
@@ -546,6 +573,7 @@ def run_solve(
         return _solve_and_write(domain, store, saved, say, start, out, geometry, comm,
                                 isotropic=isotropic, max_it=max_it, force=force, quiet=quiet,
                                 max_aspect=max_aspect, free_singularities=free_singularities,
+                                pin_radius=pin_radius,
                                 size_factor=size_factor, param=param, quad_size=quad_size,
                                 quads=quads, conformal=conformal, user_options=user_options,
                                 coarse=coarse)
@@ -624,7 +652,8 @@ def _run_record(geometry: str, comm, **arguments) -> dict:
 
 def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, isotropic,
                      max_it, force, quiet, max_aspect, free_singularities, size_factor,
-                     param, quad_size, quads, conformal, user_options, coarse=()) -> dict:
+                     param, quad_size, quads, conformal, user_options, coarse=(),
+                     pin_radius=0.0) -> dict:
     """MBO → TAO (from ``saved``, a checkpoint, if given; checkpoints into ``store``) →
     singularities → files in ``out``: the rest of :func:`run_solve`. With ``coarse``
     domains, nested iteration from the coarsest to ``domain`` instead."""
@@ -712,7 +741,8 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                 field = FrameField.nested(
                     [*coarse, domain], isotropic=isotropic, max_aspect=max_aspect,
                     pin_singularities=not free_singularities, max_it=max_it,
-                    monitor=tao_monitor, mbo_monitor=mbo_monitor, level_monitor=level_done,
+                    pin_radius=pin_radius, monitor=tao_monitor, mbo_monitor=mbo_monitor,
+                    level_monitor=level_done,
                     checkpoint=keep_finest, restore=restore_finest)
             result = field.result
         else:
@@ -722,7 +752,8 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             say(f"solving ({kind}, TAO {tao_type}) ...")
             with _failures(f"the TAO solve ({tao_type})"):
                 result = field.solve(pin_singularities=not free_singularities, max_it=max_it,
-                                     monitor=tao_monitor, checkpoint=keep, resume=state)
+                                     pin_radius=pin_radius, monitor=tao_monitor,
+                                     checkpoint=keep, resume=state)
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins
     interrupts.set_stage("writing the results")
     interrupts.checkpoint(comm)
@@ -1050,6 +1081,7 @@ def main(argv: list[str] | None = None) -> int:
                         quads=args.quads,
                         conformal=args.conformal,
                         levels=args.levels, nested_meshes=args.nested_meshes,
+                        pin_radius=args.pin_radius,
                     )
                 except Exception as e:
                     watch.stage = "reporting the failure"

@@ -61,6 +61,8 @@ class FrameField:
     singularities: list[dict] = field(default_factory=list)
     #: Whether the last :meth:`solve` held the singular triangles' orientation.
     pinned_singularities: bool | None = None
+    #: The radius of the disk held around each pinned singularity (0: its triangle only).
+    pin_radius: float = 0.0
     #: The last :meth:`parametrise`'s map (on rank 0; None elsewhere) and its measures.
     parametrisation: object | None = field(default=None, repr=False)
     param_quality: dict | None = None
@@ -115,7 +117,7 @@ class FrameField:
                max_aspect: float | None = DEFAULT_MAX_ASPECT, pin_singularities: bool = True,
                max_it: int | None = None, monitor=None, mbo_monitor=None,
                level_monitor=None, options_prefix: str = "", checkpoint=None,
-               restore=None) -> "FrameField":
+               restore=None, pin_radius: float = 0.0) -> "FrameField":
         """Nested iteration: MBO and a solve on the coarsest of ``domains`` (meshes of one
         shape, coarse to fine), then on each finer one a solve from the coarser solution
         (:meth:`transferred`); returns the field on the finest (collective).
@@ -124,9 +126,13 @@ class FrameField:
         relative to the coarsest level's |g₀| (``reference_gradient`` of
         :func:`ufl_frames.solvers.solve`). With ``pin_singularities`` each level holds the
         singular triangles of its own start, so the singularities are MBO's, carried
-        down. ``monitor`` gets every level's history entries, ``mbo_monitor`` the MBO
+        down, and with ``pin_radius`` > 0 also every vertex closer than that to them: the
+        same disk on every level. (A pin of one triangle is escaped on fine meshes by a
+        ±1/4 pair that carries the singularity away; a disk of the coarsest mesh's size
+        keeps MBO's singularities, at a higher H: ``benchmarks/README.md``, "Pinned
+        singularities".) ``monitor`` gets every level's history entries, ``mbo_monitor`` the MBO
         levels, ``level_monitor(entry)`` a summary per level ({"level", "triangles",
-        "iterations", "H", "reason", "seconds"}); the finest field's :attr:`levels`
+        "iterations", "H", "reason", "singularities", "seconds"}); the finest field's :attr:`levels`
         lists those summaries.
 
         ``checkpoint(state, finest)`` receives every level's states (as for :meth:`solve`,
@@ -156,7 +162,8 @@ class FrameField:
                 checkpoint(state, finest)
 
             result = field.solve(pin_singularities=pin_singularities, max_it=max_it,
-                                 monitor=monitor, options_prefix=options_prefix,
+                                 pin_radius=pin_radius, monitor=monitor,
+                                 options_prefix=options_prefix,
                                  checkpoint=None if checkpoint is None else keep,
                                  resume=resume, reference_gradient=reference)
             if reference is None:
@@ -165,6 +172,7 @@ class FrameField:
             levels.append({"level": k, "triangles": domain.num_cells,
                            "iterations": result.iterations, "H": result.H_final,
                            "reason": result.converged_reason,
+                           "singularities": sorted(s["index"] for s in field.singularities),
                            "seconds": time.perf_counter() - start})
             if level_monitor is not None:
                 level_monitor(levels[-1])
@@ -186,16 +194,20 @@ class FrameField:
     def solve(self, pin_singularities: bool = True, max_it: int | None = None, monitor=None,
               options_prefix: str = "", checkpoint=None,
               resume: solvers.SolverState | None = None,
-              reference_gradient: float | None = None) -> solvers.SolveResult:
+              reference_gradient: float | None = None,
+              pin_radius: float = 0.0) -> solvers.SolveResult:
         """Minimise H from the current field with TAO (:func:`ufl_frames.solvers.solve`);
         ``q`` holds the result, ``singularities`` are found again (collective).
 
         ``checkpoint`` and ``resume`` as for :func:`~ufl_frames.solvers.solve`: a solve
         resumed on the field :meth:`initial` made (its constraints and pinned vertices
         are those of the original start) ends as the original would have;
-        ``reference_gradient`` as there (nested iteration: see :meth:`nested`)."""
+        ``reference_gradient`` as there (nested iteration: see :meth:`nested`). With
+        ``pin_singularities`` the orientation is held at the singular triangles of the
+        current field and at the vertices closer than ``pin_radius`` to them."""
         self.problem = solvers.frame_problem(
             self.q, isotropic=self.isotropic, pin_singularities=pin_singularities,
+            pin_radius=pin_radius,
             max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
             constraints=self.constraints,  # the MBO field's: boundary, normals, masses once
         )
@@ -204,6 +216,7 @@ class FrameField:
                                    resume=resume, reference_gradient=reference_gradient)
         self.singularities = singularities.locate_singularities(self.q)
         self.pinned_singularities = pin_singularities
+        self.pin_radius = pin_radius if pin_singularities else 0.0
         return self.result
 
     def _on_root(self, work, failure: str):
@@ -345,6 +358,7 @@ class FrameField:
             "isotropic": bool(self.isotropic),
             "max_aspect": self.max_aspect,
             "pinned_singularities": self.pinned_singularities,
+            "pin_radius": self.pin_radius,
             "mesh_size": domain.mesh_size,
             "requested_mesh_size": domain.requested_mesh_size,
             "num_vertices": int(domain.num_vertices),

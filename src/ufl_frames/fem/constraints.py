@@ -140,7 +140,8 @@ def frame_constraints(
     )
 
 
-def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray) -> FrameConstraints:
+def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray,
+                      radius: float = 0.0) -> FrameConstraints:
     """Constraints that also fix the cross orientation at the vertices of singular triangles.
 
     The vertices of every triangle with a nonzero index (see
@@ -148,6 +149,8 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray) -> FrameC
     held at its current value, lengths free. The singularities then stay where the
     initial field put them — the solver can neither move nor annihilate them — which
     is the intended use of the MBO field as a template (note §3, "Initial condition").
+    With ``radius`` > 0 every vertex closer than that to a singular triangle's
+    barycentre is held too (collective).
     """
     from ufl_frames.frames2d.singularities import triangle_indices
 
@@ -156,6 +159,10 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray) -> FrameC
     singular = cells[triangle_indices(cells, q, coords=x) != 0]
     marker = dolfinx.la.vector(V.dofmap.index_map, 1)
     marker.array[singular.ravel()] = 1.0
+    if radius > 0.0:
+        centres = np.concatenate(V.mesh.comm.allgather(x[singular, :2].mean(axis=1)))
+        for c in centres:
+            marker.array[np.sum((x[:, :2] - c) ** 2, axis=1) < radius**2] = 1.0
     marker.scatter_reverse(dolfinx.la.InsertMode.add)
     marker.scatter_forward()
     marker.array[constraints.boundary] = 0.0

@@ -223,12 +223,14 @@ def frame_problem(
     max_aspect: float | None = DEFAULT_MAX_ASPECT,
     boundary_angles: np.ndarray | None = None,
     constraints: FrameConstraints | None = None,
+    pin_radius: float = 0.0,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
     The sphere of 𝓜 is through the projection of ``q`` (step 5 keeps its lumped L²
     norm). With ``pin_singularities`` the cross orientation is held at the vertices of
-    the singular triangles of ``q`` (see :func:`~ufl_frames.fem.constraints.pin_singularities`).
+    the singular triangles of ``q`` and at every vertex closer than ``pin_radius`` to
+    one (see :func:`~ufl_frames.fem.constraints.pin_singularities`).
     ``max_aspect`` bounds l_max/l_min of non-isotropic frames (``math.inf`` or None: no
     bound, which the non-isotropic energy answers with degenerate frames; see
     :mod:`ufl_frames.frames2d.aspect`). ``boundary_angles``: exact boundary cross angles
@@ -245,7 +247,7 @@ def frame_problem(
         constraints = constraints.for_frames(isotropic, max_aspect)
     rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
     if pin_singularities:
-        constraints = _pin_singular_vertices(V, constraints, rows)
+        constraints = _pin_singular_vertices(V, constraints, rows, radius=pin_radius)
     cone = FrameManifold(constraints)  # no sphere yet: it passes through the projection
     projected = cone.project(rows)
     manifold = FrameManifold(constraints, radius2=cone.norm2(projected))
