@@ -146,3 +146,42 @@ def test_every_newton_type_solves_with_the_reduced_pc(tao_type):
     assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
     assert result.iterations > 0
     assert max(result.krylov_iterations) <= 3
+
+
+@pytest.mark.parametrize("via", [None, "scalable"])
+def test_ptap_equals_the_dense_product_and_leaves_the_options_as_they_were(via):
+    """``hessian._ptap``: Pᵀ A P of a random sparse A (with entries off the ranks' blocks)
+    and a rectangular block-diagonal P equals the dense product, first and reused; its
+    parallel default ("allatonce") is not left in the options database, and a user's
+    ``-matptap_via`` is kept."""
+    from ufl_frames.solvers.hessian import _ptap
+
+    rng = np.random.default_rng(7)
+    rows, cols = 5 * 8, 3 * 8  # 8 "vertices" a rank: 5 rows, 3 columns each
+    N, M = rows * COMM.size, cols * COMM.size
+    dense_a = np.where(rng.random((N, N)) < 0.2, rng.standard_normal((N, N)), 0.0)
+    dense_a = COMM.bcast(dense_a + dense_a.T, root=0)
+    dense_p = np.zeros((N, M))
+    for v in range(N // 5):
+        dense_p[5 * v:5 * v + 5, 3 * v:3 * v + 3] = COMM.bcast(rng.standard_normal((5, 3)))
+    A = PETSc.Mat().createAIJ(((rows, N), (rows, N)), comm=COMM)
+    P = PETSc.Mat().createAIJ(((rows, N), (cols, M)), comm=COMM)
+    for mat, dense in ((A, dense_a), (P, dense_p)):
+        mat.setPreallocationNNZ(dense.shape[1])
+        lo, hi = mat.getOwnershipRange()
+        for i in range(lo, hi):
+            nonzero = np.flatnonzero(dense[i]).astype(PETSc.IntType)
+            mat.setValues(i, nonzero, dense[i, nonzero])
+        mat.assemble()
+    options = [("matptap_via", via)] if via else []
+    with options_scope(options) as db:
+        R = _ptap(A, P)
+        assert (db.getString("matptap_via") if db.hasName("matptap_via") else None) == via
+        lo, hi = R.getOwnershipRange()
+        expected = dense_p.T @ dense_a @ dense_p
+        np.testing.assert_allclose(R[lo:hi, :], expected[lo:hi], atol=1e-12)
+        A.scale(2.0)
+        assert _ptap(A, P, R) is R
+        np.testing.assert_allclose(R[lo:hi, :], 2 * expected[lo:hi], atol=1e-12)
+    for mat in (A, P, R):
+        mat.destroy()
