@@ -136,7 +136,7 @@ def test_pin_radius_holds_a_disk_around_each_singular_triangle():
 def test_nested_pins_a_disk_of_the_coarsest_mesh_size():
     """Two Gmsh levels (1 069 and 4 080 triangles) where a pin of one fine triangle is
     escaped: held at the singular triangles only, the fine level grows a ±1/4 pair next to
-    the +1/4 (4 singularities; benchmarks/README.md "Pinned singularities"). Held in a disk
+    the +1/4 (4 singularities; benchmarks/README.md "Pinned singularities escape"). Held in a disk
     of the coarse mesh's size (``pin_radius``), both levels end with MBO's two, within a
     coarse edge of where MBO put them."""
     domains = [geometry.build(COMM, "piano", mesh_size=0.03434, size_factor=2.0 ** k)
@@ -181,6 +181,135 @@ def test_pin_radius_refuses_bad_values(argv, status, words, tmp_path, capsys):
     if err:
         assert words in err[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("arguments, words", [
+    ({"levels": 0}, "levels must be .auto. or an integer"),
+    ({"levels": 2.5}, "levels must be .auto. or an integer"),
+    ({"levels": 2, "conformal": True}, "--conformal"),
+])
+def test_run_solve_refuses_bad_levels(arguments, words, tmp_path):
+    with pytest.raises(cli.InputError, match=words):
+        cli.run_solve("piano", mesh_size=0.2, out=tmp_path / "out", quiet=True, comm=COMM,
+                      **arguments)
+
+
+def test_run_solve_refuses_levels_on_a_msh(tmp_path):
+    with pytest.raises(cli.InputError, match="not a .msh"):
+        cli.run_solve(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
+                      quiet=True, comm=COMM)
+
+
+def test_nested_run_interrupted_on_the_fine_mesh_resumes_to_the_same_result(tmp_path,
+                                                                              monkeypatch):
+    """``--levels 2 --resume``: interrupted during the fine mesh's solve, the run leaves
+    the fine mesh's checkpoint; resumed, it runs the coarse mesh again and ends as the
+    uninterrupted run did (same iterations, H to 1e-10)."""
+    import json
+    import signal
+
+    from ufl_frames import interrupts
+
+    root = Path(COMM.bcast(str(tmp_path), root=0))
+    args = ["solve", "piano", "--mesh-size", "0.1", "--levels", "2", "-q"]
+    assert cli.main([*args, "--out", str(root / "full")]) == 0
+    reference = json.loads((root / "full" / "summary.json").read_text())
+    assert reference["iterations"] > 4
+
+    real, seen, on_fine = interrupts.pending, [], []
+    transferred = FrameField.transferred
+
+    def to_fine(self, domain):
+        on_fine.append(True)
+        return transferred(self, domain)
+
+    def pending(comm):  # a SIGINT at the fine mesh's 4th iterate (no real signal)
+        if on_fine:
+            seen.append(1)
+            if len(seen) >= 4:
+                return signal.SIGINT
+        return real(comm)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(interrupts, "pending", pending)
+        patch.setattr(FrameField, "transferred", to_fine)
+        assert cli.main([*args, "--out", str(root / "o")]) == interrupts.INTERRUPTED_STATUS
+    assert (root / "o" / "checkpoint" / "state.npz").is_file()
+    assert cli.main([*args, "--resume", str(root / "o")]) == 0
+    resumed = json.loads((root / "o" / "summary.json").read_text())
+    assert resumed["resumed_from_iteration"] >= 2
+    assert resumed["iterations"] == reference["iterations"]
+    assert resumed["H_final"] == pytest.approx(reference["H_final"], rel=1e-10)
+    assert [e["iterations"] for e in resumed["levels"]] == \
+        [e["iterations"] for e in reference["levels"]]
+
+
+def test_auto_levels_keeps_the_coarsest_mesh_above_the_threshold():
+    """A quarter of the triangles per level, the coarsest at NESTED_COARSEST or more."""
+    assert cli.auto_levels(1887) == 1
+    assert cli.auto_levels(4 * cli.NESTED_COARSEST - 1) == 1
+    assert cli.auto_levels(4 * cli.NESTED_COARSEST) == 2
+    assert cli.auto_levels(29597) == 3
+    assert cli.auto_levels(10**12) == cli.MAX_LEVELS
+
+
+def test_run_solve_auto_levels_nests_a_fine_mesh(tmp_path):
+    """The default (--levels auto) on 7.5e3 triangles: two meshes, 1887 then 7539 triangles,
+    each meshed by Gmsh, and the result converged on the fine one."""
+    out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
+    summary = cli.run_solve("piano", mesh_size=0.025, out=out, quiet=True, comm=COMM)
+    assert [e["triangles"] for e in summary["levels"]] == [1887, summary["num_cells"]]
+    assert summary["converged"]
+    assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]
+
+
+def test_run_solve_nested_meshes_splits_the_coarsest(tmp_path):
+    """--nested-meshes: the fine mesh is the coarse one split once (4x its triangles), a
+    converged solve there from the coarse solution, MBO's singularities kept."""
+    out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
+    summary = cli.run_solve("piano", mesh_size=0.05, out=out, quiet=True, comm=COMM, levels=2,
+                            nested_meshes=True)
+    coarse, fine = (e["triangles"] for e in summary["levels"])
+    assert fine == 4 * coarse == summary["num_cells"]
+    assert summary["converged"]
+    assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]
+
+
+def test_nested_meshes_flag_reaches_run_solve():
+    args = cli.build_parser().parse_args(["solve", "piano", "--levels", "2", "--nested-meshes"])
+    assert args.nested_meshes and args.levels == 2
+    assert not cli.build_parser().parse_args(["solve", "piano"]).nested_meshes
+
+
+def test_nested_meshes_fall_back_one_level_when_the_coarsest_fails(monkeypatch):
+    """--levels auto --nested-meshes: a coarsest mesh Gmsh cannot make (or that loses a
+    hole) means one level fewer, said in a note; with --levels given it is an error."""
+    real = geometry.build_nested
+
+    def build_nested(comm, name, levels, *args, **kwargs):
+        if levels > 2:
+            raise geometry.GeometryError("too coarse to mesh")
+        return real(comm, name, levels, *args, **kwargs)
+
+    monkeypatch.setattr(geometry, "build_nested", build_nested)
+    domain = geometry.build(COMM, "piano", mesh_size=0.05)
+    said = []
+    coarse, fine = cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, True,
+                                      said.append)
+    assert len(coarse) == 1 and fine.num_cells == 4 * coarse[0].num_cells
+    assert any("too coarse to mesh: one level fewer" in line for line in said)
+    with pytest.raises(cli.InputError, match="--levels 3 --nested-meshes: too coarse"):
+        cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, False, said.append)
+
+
+def test_a_coarse_level_must_keep_the_holes():
+    from types import SimpleNamespace
+
+    with pytest.raises(geometry.GeometryError, match="Euler characteristic 1, not 0"):
+        cli._check_same_topology(SimpleNamespace(euler_characteristic=1),
+                                 SimpleNamespace(euler_characteristic=0), 4)
+    cli._check_same_topology(SimpleNamespace(euler_characteristic=0),
+                             SimpleNamespace(euler_characteristic=0), 4)
 
 
 def test_checkpoints_without_a_pin_radius_resume_as_radius_zero(tmp_path):

@@ -130,10 +130,10 @@ class FrameField:
         same disk on every level. (A pin of one triangle is escaped on fine meshes by a
         ±1/4 pair that carries the singularity away; a disk of the coarsest mesh's size
         keeps MBO's singularities, at a higher H: ``benchmarks/README.md``, "Pinned
-        singularities".) ``monitor`` gets every level's history entries, ``mbo_monitor`` the MBO
-        levels, ``level_monitor(entry)`` a summary per level ({"level", "triangles",
-        "iterations", "H", "reason", "singularities", "seconds"}); the finest field's :attr:`levels`
-        lists those summaries.
+        singularities escape by pairs".) ``monitor`` gets every level's history entries,
+        ``mbo_monitor`` the MBO levels, ``level_monitor(entry)`` a summary per level
+        ({"level", "triangles", "iterations", "H", "reason", "singularities", "seconds"});
+        the finest field's :attr:`levels` lists those summaries.
 
         ``checkpoint(state, finest)`` receives every level's states (as for :meth:`solve`,
         ``finest`` telling whether they are of the last mesh; an exception from it ends
