@@ -149,12 +149,19 @@ def test_every_newton_type_solves_with_the_reduced_pc(tao_type):
 
 
 @pytest.mark.parametrize("via", [None, "scalable"])
-def test_ptap_equals_the_dense_product_and_leaves_the_options_as_they_were(via):
+@pytest.mark.parametrize("threshold", [0, None])
+def test_ptap_equals_the_dense_product_and_leaves_the_options_as_they_were(via, threshold,
+                                                                          monkeypatch):
     """``hessian._ptap``: Pᵀ A P of a random sparse A (with entries off the ranks' blocks)
-    and a rectangular block-diagonal P equals the dense product, first and reused; its
-    parallel default ("allatonce") is not left in the options database, and a user's
-    ``-matptap_via`` is kept."""
+    and a rectangular block-diagonal P equals the dense product, first and reused, with
+    the large matrices' algorithm (threshold 0) and without; the parallel default
+    ("allatonce") is not left in the options database, and a user's ``-matptap_via`` is
+    kept."""
+    from ufl_frames.solvers import hessian
     from ufl_frames.solvers.hessian import _ptap
+
+    if threshold is not None:
+        monkeypatch.setattr(hessian, "ALLATONCE_ROWS", threshold)
 
     rng = np.random.default_rng(7)
     rows, cols = 5 * 8, 3 * 8  # 8 "vertices" a rank: 5 rows, 3 columns each

@@ -93,21 +93,27 @@ def _block_diagonal(blocks: np.ndarray, index_map, comm, result=None) -> PETSc.M
     return result
 
 
+#: In parallel, Pᵀ A P of an A with at least this many rows uses PETSc's "allatonce"
+#: algorithm (see :func:`_ptap`): 5 rows a vertex, so meshes of about 6·10⁵ triangles on.
+ALLATONCE_ROWS = 1_500_000
+
+
 def _ptap(A: PETSc.Mat, P: PETSc.Mat, result: PETSc.Mat | None = None) -> PETSc.Mat:
     """Pᵀ A P (into ``result`` where given: the numeric product of the same pattern).
 
-    In parallel the first product is PETSc's "allatonce" algorithm unless the user chose
-    one (``-matptap_via``): PETSc's default keeps intermediate products for the reuse
-    that are larger than the result. For Tᵀ G T on 2 ranks (benchmarks/README): at 2.5·10⁵
-    triangles a rank went from 470 to 700 MB in the first product (the result: 48 MB a
-    rank), with "allatonce" to 541 MB; at 10⁶ triangles the peak after two Newton steps is
-    3 019 instead of 3 660 MB a rank. Its numeric products are slower (0.78–0.93 s instead
-    of 0.43 s at 2.5·10⁵ triangles: about 10 % of a Newton step); ``-matptap_via
-    scalable`` takes the default back. Serial PETSc has no such algorithm and keeps less.
+    PETSc's default parallel algorithm keeps intermediate products for the reuse that are
+    larger than the result; its "allatonce" keeps none but its numeric products are
+    slower. Measured for Tᵀ G T on 2 ranks (benchmarks/README): at 2.5·10⁵ triangles the
+    first product took a rank from 470 to 700 MB (the result: 48 MB a rank), with
+    "allatonce" to 541 MB, but a numeric product took 0.78–0.93 s instead of 0.43 s, and at
+    10⁵ triangles the solve 78.3 s instead of 67.6 s. At 10⁶ triangles memory is what
+    runs out: the peak after two Newton steps is 3 019 instead of 3 660 MB a rank. So A
+    of :data:`ALLATONCE_ROWS` rows or more gets "allatonce" in parallel, unless the user
+    chose (``-matptap_via``); serial PETSc has no such algorithm and keeps less.
     """
     if result is not None:
         return A.PtAP(P, result=result)
-    if A.getComm().getSize() == 1:
+    if A.getComm().getSize() == 1 or A.getSize()[0] < ALLATONCE_ROWS:
         return A.PtAP(P)
     with petsc_defaults("", {"matptap_via": "allatonce"}):
         return A.PtAP(P)
