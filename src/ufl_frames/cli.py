@@ -101,24 +101,24 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _positive_float(text: str) -> float:
+def _float_option(text: str, zero_allowed: bool) -> float:
+    """A finite number > 0 (>= 0 with ``zero_allowed``) from the command line."""
+    words = "a number >= 0" if zero_allowed else "a positive number"
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected {words}, got {text!r}") from None
+    if not (math.isfinite(value) and (value > 0 or (zero_allowed and value == 0))):
+        raise argparse.ArgumentTypeError(f"must be {words}, got {text!r}")
     return value
+
+
+def _positive_float(text: str) -> float:
+    return _float_option(text, zero_allowed=False)
 
 
 def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
-    return value
+    return _float_option(text, zero_allowed=True)
 
 
 def _levels(text: str):
@@ -401,17 +401,21 @@ MAX_LEVELS = 8
 NESTED_COARSEST = 1500
 
 
+def _finite_real(value) -> bool:
+    """Whether ``value`` is a finite int or float (not a bool)."""
+    real = isinstance(value, (int, float)) and not isinstance(value, bool)
+    return real and math.isfinite(value)
+
+
 def _check_parameters(mesh_size, max_it) -> None:
-    real = isinstance(mesh_size, (int, float)) and not isinstance(mesh_size, bool)
-    if mesh_size is not None and not (real and math.isfinite(mesh_size) and mesh_size > 0):
+    if mesh_size is not None and not (_finite_real(mesh_size) and mesh_size > 0):
         raise InputError(f"mesh size must be a positive number, got {mesh_size!r}")
     if isinstance(max_it, bool) or not isinstance(max_it, int) or not 0 < max_it <= MAX_INT:
         raise InputError(f"max-it must be a positive integer at most {MAX_INT}, got {max_it!r}")
 
 
 def _check_pin_radius(pin_radius, free_singularities: bool) -> None:
-    real = isinstance(pin_radius, (int, float)) and not isinstance(pin_radius, bool)
-    if not (real and math.isfinite(pin_radius) and pin_radius >= 0):
+    if not (_finite_real(pin_radius) and pin_radius >= 0):
         raise InputError(f"pin radius must be a number >= 0, got {pin_radius!r}")
     if pin_radius > 0 and free_singularities:
         raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
@@ -652,8 +656,8 @@ def _run_record(geometry: str, comm, **arguments) -> dict:
 
 def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, isotropic,
                      max_it, force, quiet, max_aspect, free_singularities, size_factor,
-                     param, quad_size, quads, conformal, user_options, coarse=(),
-                     pin_radius=0.0) -> dict:
+                     pin_radius, param, quad_size, quads, conformal, user_options,
+                     coarse=()) -> dict:
     """MBO → TAO (from ``saved``, a checkpoint, if given; checkpoints into ``store``) →
     singularities → files in ``out``: the rest of :func:`run_solve`. With ``coarse``
     domains, nested iteration from the coarsest to ``domain`` instead."""
