@@ -106,9 +106,13 @@ def figure(histories: dict, rtols: list[float], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(histories), figsize=(5 * len(histories), 4), squeeze=False)
+    columns = 2 if len(histories) == 4 else min(3, len(histories))
+    rows = -(-len(histories) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(5 * columns, 4 * rows), squeeze=False)
+    for ax in axes.flat[len(histories):]:
+        ax.set_visible(False)
     markers = "osD^v"
-    for ax, (case, history) in zip(axes[0], histories.items(), strict=True):
+    for ax, (case, history) in zip(axes.flat, histories.items(), strict=False):
         H_full = history[-1]["H"]
         excess = [max((e["H"] - H_full) / H_full, 1e-12) for e in history]
         ax.semilogy(range(len(history)), excess, "-", color="0.3", lw=1.2,
