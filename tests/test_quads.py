@@ -119,6 +119,25 @@ def test_a_close_pair_is_repaired_into_two_grid_vertices():
     assert valence.get("3") == 1 and valence.get("5") == 1
 
 
+def test_a_fold_free_map_winding_twice_around_a_vertex_is_invalid():
+    """(U, V) = z² on a square around the origin has no folded triangle, yet its corner
+    angles add up to 4π at the origin: only that vertex is miswound, and its triangles
+    are invalid; the identity map is valid everywhere."""
+    x, cells = grid(20, 20, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    vertex = np.zeros(mesh.num_wedges, dtype=np.int64)
+    vertex[mesh.corners] = mesh.cells
+    z = x[vertex, 0] + 1j * x[vertex, 1]
+    identity = seamless.parametrisation(mesh, np.stack([z.real, z.imag], axis=1), 1.0)
+    assert not seamless.invalid(identity).any()
+    square = seamless.parametrisation(mesh, np.stack([(z**2).real, (z**2).imag], axis=1), 1.0)
+    assert not seamless.folded(square).any()
+    origin = int(np.flatnonzero(np.all(np.isclose(x, 0.0), axis=1))[0])
+    assert np.flatnonzero(seamless.miswound(square)).tolist() == [origin]
+    around = np.any(mesh.cells == origin, axis=1)
+    assert np.array_equal(seamless.invalid(square), around)
+
+
 def pair_field(x, plus, minus):
     """Frames turning by +1/4 around ``plus`` and −1/4 around ``minus`` (unit lengths)."""
     theta = (np.arctan2(x[:, 1] - plus[1], x[:, 0] - plus[0])

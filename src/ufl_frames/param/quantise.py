@@ -35,7 +35,7 @@ from ufl_frames.param.cut import CutMesh
 from ufl_frames.param.seamless import (
     Parametrisation,
     boundary_coordinates,
-    folded,
+    invalid,
     least_squares_system,
     parametrisation,
     quarter_turn,
@@ -208,9 +208,11 @@ def _covariance(lu, Fy: sp.csr_matrix, block: int = 256) -> np.ndarray:
     return 0.5 * (G + G.T)
 
 
-def _greedy(mean: np.ndarray, G: np.ndarray, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _greedy(mean: np.ndarray, G: np.ndarray, phase: np.ndarray,
+            forced=()) -> tuple[np.ndarray, np.ndarray]:
     """Fix the functionals one at a time, cheapest rounding first within the lowest open
-    ``phase``; return the fixed ones (indices, in order) and the integer of every one.
+    ``phase`` (after the ``forced`` (index, integer) pairs, in their order); return the
+    fixed ones (indices, in order) and the integer of every one.
 
     A rounding that would leave a functional it determines at a non-integer (a parity:
     around a boundary loop whose seams flip a coordinate's sign, 2 a = an integer
@@ -231,6 +233,14 @@ def _greedy(mean: np.ndarray, G: np.ndarray, phase: np.ndarray) -> tuple[np.ndar
         fractional = np.abs(new_mean[follows] - np.rint(new_mean[follows]))
         return column, new_mean, not np.any(fractional > PARITY_TOLERANCE)
 
+    for i, value in forced:
+        if C[i, i] <= DETERMINED * own[i]:
+            continue  # the earlier ones determine it
+        column, mean, _ = trial(i, value)
+        C -= np.outer(column, column) / C[i, i]
+        mean[i] = value
+        open_[i] = False
+        fixed.append(int(i))
     while open_.any():
         idx = np.flatnonzero(open_)
         var = np.diag(C)[idx]
@@ -269,9 +279,11 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
 
     Where the rounded map folds (a triangle with det ∇(U, V) ≤ 0), the folded triangles
     and their neighbours are weighted up and the map solved again with the same integers
-    (:func:`~ufl_frames.param.seamless.unfold`). Raises
-    :class:`QuantisationError` if it still folds: the grid is too coarse for the field's
-    singularities or its narrow parts at this scale.
+    (:func:`~ufl_frames.param.seamless.unfold`); where it still folds, or winds a full
+    turn wrong around a vertex (:func:`~ufl_frames.param.seamless.invalid`), quantities
+    are rounded the other way (:func:`_repair`). Raises :class:`QuantisationError` if it
+    stays invalid: the grid is too coarse for the field's singularities or its narrow
+    parts at this scale.
     """
     anchor = anchor_wedge(mesh)
     AT, b, T = least_squares_system(mesh, scale, anchor)
@@ -292,16 +304,12 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
         fixed, target = _greedy(mean, G, phase)
         rounded = int(fixed.size)
     if fixed.size:
-        F_fixed, d = Fk[fixed], target[fixed]
-        max_shift = float(np.abs(F_fixed @ y0 - d).max())
-        # ∂y/∂d: the constrained minimiser is y0 − Z (F Z)⁻¹ (F y0 − d), Z = N⁻¹ Fᵀ
-        Z = lu.solve(F_fixed.T.toarray())
-        response = Z @ np.linalg.inv(F_fixed @ Z)
-        y = y0 - response @ (F_fixed @ y0 - d)
-        param, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, d)
-        if folded(param).any():
-            param, repaired = _repair(mesh, (AT, b, T, scale), y0, F, F_fixed, d, response,
-                                      param)
+        max_shift = float(np.abs(Fk[fixed] @ y0 - target[fixed]).max())
+        system = (AT, b, T, scale, lu, y0)
+        param, response = _rounded_map(mesh, system, Fk[fixed], target[fixed])
+        if invalid(param).any():
+            param, repaired = _repair(mesh, system, F, (Fk, mean, G, phase), fixed, target,
+                                      param, response)
     else:
         param, _ = unfold(mesh, AT, b, T, y0, scale)
     values = F @ param.uv.ravel()
@@ -312,55 +320,80 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
             f"the rounding left a {kinds[worst]} quantity {off.max():.2g} away from an integer "
             "(the integer constraints conflict)")
     values = np.rint(values)
-    bad = int(np.count_nonzero(folded(param)))
+    bad = int(np.count_nonzero(invalid(param)))
     if bad:
         raise QuantisationError(
-            f"the integer-grid map folds or collapses {bad} of {mesh.cells.shape[0]} "
-            "triangles at this quad size: the grid is too coarse for the field's "
-            "singularities or narrow parts; take a smaller quad size")
+            f"the integer-grid map folds, collapses or winds wrong around {bad} of "
+            f"{mesh.cells.shape[0]} triangles at this quad size: the grid is too coarse for "
+            "the field's singularities or narrow parts; take a smaller quad size")
     increase = (_misfit_energy(param) - _misfit_energy(seamless)) / max(float(b @ b), 1e-300)
     return IntegerGridMap(param=param, seamless=seamless, functionals=F, values=values,
                           kinds=kinds, rounded=rounded, max_shift=max_shift,
                           energy_increase=increase, repaired=repaired)
 
 
-def _repair(mesh, system, y0, F, F_fixed, d, response, param):
+def _rounded_map(mesh, system, F_fixed, d):
+    """The map with the integers F_fixed y = d (unfolded: :func:`~ufl_frames.param.seamless.
+    unfold`), and its response ∂y/∂d."""
+    AT, b, T, scale, lu, y0 = system
+    # the constrained minimiser is y0 − Z (F Z)⁻¹ (F y0 − d), Z = N⁻¹ Fᵀ
+    Z = lu.solve(F_fixed.T.toarray())
+    response = Z @ np.linalg.inv(F_fixed @ Z)
+    y = y0 - response @ (F_fixed @ y0 - d)
+    param, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, d)
+    return param, response
+
+
+def _repair(mesh, system, F, rounding, fixed, target, param, response):
     """Move by one, to the other neighbouring integer and then away from it, each of the
-    :data:`REPAIR_CANDIDATES` fixed quantities the folded triangles depend on most (a
-    boundary curve and a singular vertex rounded onto one line, say): at most
-    :data:`REPAIRS` times, each keeping the best trial if it folds fewer triangles and
-    leaves every quantity an integer. Returns the map and the number of quantities
-    moved."""
-    AT, b, T, scale = system
-    seamless_values = F_fixed @ y0
+    :data:`REPAIR_CANDIDATES` fixed quantities the invalid triangles (folded, or around a
+    vertex the map winds wrong: :func:`~ufl_frames.param.seamless.invalid`) depend on most
+    (a boundary curve and a singular vertex rounded onto one line, say), alone and with
+    those the greedy fixed after it rounded again (a boundary curve across a moved
+    singular vertex's seam moves with it): at most :data:`REPAIRS` times, each keeping the
+    best trial if it has fewer invalid triangles and leaves every quantity an integer.
+    Returns the map and the number of rounds that moved one."""
+    Fk, mean, G, phase = rounding
+    T = system[2]
     repaired = 0
     for _ in range(REPAIRS):
-        bad = folded(param)
+        bad = invalid(param)
         if not bad.any():
             break
         rows = (2 * mesh.corners[bad].reshape(-1, 1) + np.arange(2)).ravel()
         influence = np.abs(T[rows] @ response).sum(axis=0)
-        best = None
         trials = []
-        for i in np.argsort(-influence)[:REPAIR_CANDIDATES]:
-            toward = 1.0 if seamless_values[i] >= d[i] else -1.0  # the other neighbour first
-            trials += [(i, toward), (i, -toward)]
-        for i, step in trials:
-            trial = d.copy()
-            trial[i] += step
-            y = y0 - response @ (F_fixed @ y0 - trial)
-            candidate, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, trial)
+        for k in np.argsort(-influence, kind="stable")[:REPAIR_CANDIDATES]:
+            i = fixed[k]
+            toward = 1.0 if mean[i] >= target[i] else -1.0  # the other neighbour first
+            kept = [(j, target[j]) for j in fixed[:k]]
+            for step in (toward, -toward):
+                alone = target.copy()
+                alone[i] += step
+                trials += [("alone", (fixed, alone)),
+                           ("regreedy", kept + [(i, target[i] + step)])]
+        best = None
+        for kind, trial in trials:
+            if kind == "alone":  # the quantity alone, every other one kept
+                trial_fixed, trial_target = trial
+            else:  # the quantity and those the greedy fixed after it, rounded again
+                try:
+                    trial_fixed, trial_target = _greedy(mean, G, phase, trial)
+                except QuantisationError:
+                    continue
+            candidate, trial_response = _rounded_map(mesh, system, Fk[trial_fixed],
+                                                     trial_target[trial_fixed])
             values = F @ candidate.uv.ravel()
             if np.abs(values - np.rint(values)).max(initial=0.0) > INTEGER_TOLERANCE:
                 continue
-            count = int(np.count_nonzero(folded(candidate)))
+            count = int(np.count_nonzero(invalid(candidate)))
             if count < int(np.count_nonzero(bad)) and (best is None or count < best[0]):
-                best = (count, trial, candidate)
+                best = (count, trial_fixed, trial_target, candidate, trial_response)
                 if count == 0:
                     break
         if best is None:
             break
-        _, d, param = best
+        _, fixed, target, param, response = best
         repaired += 1
     return param, repaired
 

@@ -33,7 +33,8 @@ from ufl_frames.param.cut import CutMesh
 
 __all__ = ["Parametrisation", "boundary_coordinates", "gradients", "integrate",
            "least_squares_system", "parametrisation", "quarter_turn", "scale_for_quad_count",
-           "scale_for_quad_size", "targets", "unfold", "weighted_solve", "wedge_of", "folded"]
+           "scale_for_quad_size", "targets", "unfold", "weighted_solve", "wedge_of", "folded",
+           "angle_sums", "invalid", "miswound"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -248,6 +249,52 @@ def folded(p: Parametrisation) -> np.ndarray:
     the median (two corners on one point, say two singular vertices rounded together)."""
     det = p.grad_u[:, 0] * p.grad_v[:, 1] - p.grad_u[:, 1] * p.grad_v[:, 0]
     return det <= COLLAPSED * np.median(np.abs(det))
+
+
+#: |sin| of a corner angle below which :func:`angle_sums` takes a triangle as flat.
+FLAT = 1e-9
+
+
+def angle_sums(cells: np.ndarray, corners: np.ndarray, n: int) -> np.ndarray:
+    """Per vertex (n,) the sum of its triangles' corner angles, ``corners`` (m, 3, 2) the
+    points of every triangle's corners: the angle between the two edges, in [0, π],
+    negative where the triangle is clockwise. A triangle flattened onto a segment (a
+    rounded map has such slivers at grid points) counts 0 or π whichever sign round-off
+    gives its area: its signed angle would be ±π at random."""
+    total = np.zeros(n)
+    for i in range(3):
+        a = corners[:, (i + 1) % 3] - corners[:, i]
+        b = corners[:, (i + 2) % 3] - corners[:, i]
+        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        angle = np.arctan2(np.abs(cross), np.einsum("mk,mk->m", a, b))
+        flat = np.abs(cross) <= FLAT * np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+        np.add.at(total, cells[:, i], np.where(flat | (cross > 0), angle, -angle))
+    return total
+
+
+def miswound(p: Parametrisation) -> np.ndarray:
+    """Vertices around which (U, V) turns by a full turn more or less than the grid: a
+    map can be fold-free and still wrap once more (or less) around a cone. Inside, the
+    corner angles of (U, V) add up to 2π − j π/2 around a vertex of turn j (a grid
+    vertex of valence 4 − j), up to whole turns; on the boundary to the domain's angle
+    within half a turn (it is a multiple of π/2 there, the iso-lines' corner)."""
+    mesh = p.mesh
+    n = mesh.x.shape[0]
+    cells = mesh.cells
+    expected = angle_sums(cells, mesh.x[cells], n)
+    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
+    inside = np.ones(n, dtype=bool)
+    inside[boundary] = False
+    inside[np.setdiff1d(np.arange(n), cells)] = False
+    expected[inside] = 2 * np.pi
+    expected[mesh.singular] -= mesh.turns * np.pi / 2
+    return np.abs(angle_sums(cells, p.corner_values(), n) - expected) >= np.pi
+
+
+def invalid(p: Parametrisation) -> np.ndarray:
+    """Triangles where the map is not a valid grid map: folded or collapsed
+    (:func:`folded`), or around a vertex where it winds wrong (:func:`miswound`)."""
+    return folded(p) | miswound(p)[p.mesh.cells].any(axis=1)
 
 
 def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarray:

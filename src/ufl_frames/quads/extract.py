@@ -301,7 +301,12 @@ def _lines(mesh, C):
     edge, num, den, grid = (np.concatenate(k) for k in zip(*met, strict=True))
     edge_first, edge_group = _group(edge, num, den)
     n_edge = edge_first.size
-    first_node, last_node, along_inner = (np.where(k < 0, n + edge_group[-1 - k], k)
+    def node_ids(k):  # edge point −1 − i is node n + its group; vertices keep their id
+        ids, points = k.copy(), k < 0  # (np.where would index edge_group with every k)
+        ids[points] = n + edge_group[-1 - k[points]]
+        return ids
+
+    first_node, last_node, along_inner = (node_ids(k)
                                           for k in (first_node, last_node, along_inner))
     e, ta = edge[edge_first], num[edge_first] / den[edge_first]
     va, vb = mesh.edges[e, 0], mesh.edges[e, 1]
