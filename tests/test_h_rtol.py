@@ -64,6 +64,34 @@ def test_test_on_H_needs_newton_steps_and_a_positive_tolerance():
     assert tao._h_converged(history, rtol=2e-5)
 
 
+@pytest.mark.parametrize("theta", [1e-3, 1e-2])
+def test_nested_test_compares_what_is_left_with_the_coarser_levels_gain(theta):
+    """The finest level's test (``-frames_nested_rtol θ``): on H_k = H* + c ρ^k (ρ³ ≥ 1/2,
+    so the bound is exactly what is left, c ρ^k) it stops at the first k with
+    c ρ^k ≤ θ (H_c − H_k), H_c the coarser level's H, whatever ``rtol`` adds."""
+    H_star, c, rate, gain = 1e-4, 2e-5, 0.85, 1.6e-4
+    energies = [H_star + c * rate**k for k in range(60)]
+    coarse = H_star + gain
+    expected = next(k for k in range(6, 60)
+                    if c * rate**k <= theta * (coarse - energies[k]))
+    stops = [k for k in range(6, 60)
+             if tao._h_converged(_history(energies[: k + 1]), rtol=0.0,
+                                 coarse_energy=coarse, nested_rtol=theta)]
+    assert stops[0] == expected
+    margin = [abs(c * rate**k / (theta * (coarse - energies[k])) - 1) for k in (expected - 1,
+                                                                              expected)]
+    assert min(margin) > 1e-3  # no tie at the boundary: the comparison is decided
+    # without the coarser level, or with θ = 0, only rtol counts (0 here: never)
+    assert not any(tao._h_converged(_history(energies[: k + 1]), rtol=0.0)
+                   for k in range(6, 60))
+    assert not any(tao._h_converged(_history(energies[: k + 1]), rtol=0.0,
+                                    coarse_energy=coarse, nested_rtol=0.0)
+                   for k in range(6, 60))
+    # a level still above the coarser level's H has gained nothing yet: no stop
+    assert not tao._h_converged(_history(energies[:30]), rtol=0.0,
+                                coarse_energy=energies[29] - 1e-12, nested_rtol=theta)
+
+
 @pytest.fixture(scope="module")
 def gauss_newton_piano():
     """The non-isotropic piano at h = 0.1 solved by Gauss–Newton alone (its linear tail),

@@ -32,7 +32,8 @@ HESSIANS = ("hybrid", "exact", "gauss_newton")
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 _POSITIVE_INTS = ("tao_max_it",)
 _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
-                       "frames_h_rtol", "tao_gatol", "tao_grtol", "tao_gttol")
+                       "frames_h_rtol", "frames_nested_rtol", "tao_gatol", "tao_grtol",
+                       "tao_gttol")
 _REALS = ("tao_fmin",)
 #: Switches (``-name`` alone means true) and the values PETSc reads as one.
 _BOOLS = ("frames_gn_adapt", "frames_gn_adapt_bound", "frames_active_consistent")

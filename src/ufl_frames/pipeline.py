@@ -124,7 +124,10 @@ class FrameField:
 
         Every level stops at the accuracy asked of the whole solve: the gradient tests are
         relative to the coarsest level's |g₀| (``reference_gradient`` of
-        :func:`ufl_frames.solvers.solve`). With ``pin_singularities`` each level holds the
+        :func:`ufl_frames.solvers.solve`), and the finest one also stops once the decrease
+        of H still to come is below θ of what it gained on the coarser level's minimum
+        (``coarse_energy``, ``-frames_nested_rtol θ``): its algebraic error a small part
+        of the discretisation error. With ``pin_singularities`` each level holds the
         singular triangles of its own start, so the singularities are MBO's, carried
         down, and with ``pin_radius`` > 0 also every vertex closer than that to them: the
         same disk on every level. (A pin of one triangle is escaped on fine meshes by a
@@ -165,7 +168,8 @@ class FrameField:
                                  pin_radius=pin_radius, monitor=monitor,
                                  options_prefix=options_prefix,
                                  checkpoint=None if checkpoint is None else keep,
-                                 resume=resume, reference_gradient=reference)
+                                 resume=resume, reference_gradient=reference,
+                                 coarse_energy=levels[-1]["H"] if finest and levels else None)
             if reference is None:
                 reference = result.history[0]["gnorm"]
             histories.append(result.history)
@@ -195,14 +199,16 @@ class FrameField:
               options_prefix: str = "", checkpoint=None,
               resume: solvers.SolverState | None = None,
               reference_gradient: float | None = None,
-              pin_radius: float = 0.0) -> solvers.SolveResult:
+              pin_radius: float = 0.0,
+              coarse_energy: float | None = None) -> solvers.SolveResult:
         """Minimise H from the current field with TAO (:func:`ufl_frames.solvers.solve`);
         ``q`` holds the result, ``singularities`` are found again (collective).
 
         ``checkpoint`` and ``resume`` as for :func:`~ufl_frames.solvers.solve`: a solve
         resumed on the field :meth:`initial` made (its constraints and pinned vertices
         are those of the original start) ends as the original would have;
-        ``reference_gradient`` as there (nested iteration: see :meth:`nested`). With
+        ``reference_gradient`` and ``coarse_energy`` as there (nested iteration: see
+        :meth:`nested`). With
         ``pin_singularities`` the orientation is held at the singular triangles of the
         current field and at the vertices closer than ``pin_radius`` to them."""
         self.problem = solvers.frame_problem(
@@ -213,7 +219,8 @@ class FrameField:
         )
         self.result = solvers.solve(self.problem, max_it=max_it, monitor=monitor,
                                    options_prefix=options_prefix, checkpoint=checkpoint,
-                                   resume=resume, reference_gradient=reference_gradient)
+                                   resume=resume, reference_gradient=reference_gradient,
+                                   coarse_energy=coarse_energy)
         self.singularities = singularities.locate_singularities(self.q)
         self.pinned_singularities = pin_singularities
         self.pin_radius = pin_radius if pin_singularities else 0.0
