@@ -25,6 +25,10 @@ time per triangle; and the issue's targets for the non-isotropic piano, each mar
 ``holds`` / ``fails`` / ``not measured``. A run past ``--timeout`` seconds is killed and
 reported as ``timeout`` with the stages it finished.
 
+``--json`` keeps the records; ``--from-json`` reports on such files again, several runs
+together (a serial series and a 2-rank one, say), and ``--figure`` plots the seconds and
+the finest level's Newton steps against the triangles.
+
 Unknown single-dash arguments (``-tao_nls_pc_type hypre``) reach every run's PETSc options.
 The solves use the ``ufl_frames`` that the interpreter imports (``PYTHONPATH=OTHER/src``
 measures another checkout). Times are wall-clock on whatever else the machine runs: compare
@@ -222,9 +226,15 @@ def print_table(records) -> None:
 
 def growth_factors(records, case) -> list[tuple]:
     """(a, b, Newton, KSP mean, solve time per triangle) growth per 2x refinement between
-    consecutive finished sizes of ``case``."""
-    done = sorted((r for r in records if r["case"] == case and r["status"] == "ok"),
-                  key=lambda r: r["triangles"])
+    consecutive finished sizes of ``case``: one record a size (the first, fewest ranks
+    first), each next size at least twice the triangles of the last one taken (records
+    of several runs, ``--from-json``, may hold sizes too close to extrapolate from)."""
+    finished = sorted((r for r in records if r["case"] == case and r["status"] == "ok"),
+                      key=lambda r: (r["triangles"], r["ranks"]))
+    done = []
+    for r in finished:
+        if not done or r["triangles"] >= 2 * done[-1]["triangles"]:
+            done.append(r)
     factors = []
     for a, b in zip(done[:-1], done[1:], strict=True):
         halvings = 0.5 * math.log2(b["triangles"] / a["triangles"])  # h → h/2: ×4
@@ -246,8 +256,9 @@ def growth(records) -> list[str]:
     lines = []
     for case in dict.fromkeys(r["case"] for r in records):
         for a, b, newton, ksp, cost in growth_factors(records, case):
-            lines.append(f"{case}: {a['triangles']} -> {b['triangles']} triangles, per 2x "
-                         f"refinement: Newton its x{newton:.2f}, mean KSP its x{ksp:.2f}, "
+            ranks = "" if a["ranks"] == b["ranks"] else f" (ranks {a['ranks']} -> {b['ranks']})"
+            lines.append(f"{case}: {a['triangles']} -> {b['triangles']} triangles{ranks}, per "
+                         f"2x refinement: Newton its x{newton:.2f}, mean KSP its x{ksp:.2f}, "
                          f"solve time per triangle x{cost:.2f}")
     return lines
 
@@ -313,6 +324,12 @@ def parse_args(argv=None):
                         "--nested-meshes) instead of each meshed by Gmsh")
     parser.add_argument("--quads", action="store_true",
                         help="also make the quad mesh (default quad size) and time its stages")
+    parser.add_argument("--figure", type=Path, default=None,
+                        help="plot the seconds and the finest level's Newton steps against "
+                        "the triangles here (PNG)")
+    parser.add_argument("--from-json", nargs="+", type=Path, default=None, metavar="JSON",
+                        help="report (tables, growth, targets, --figure) on the records that "
+                        "earlier --json runs wrote, running nothing")
     return parser.parse_known_args(argv)
 
 
@@ -334,6 +351,10 @@ def main(argv=None) -> int:
         if comm.rank == 0:
             args.record.write_text(json.dumps(record))
         return 0
+    if args.from_json:
+        records = [r for path in args.from_json for r in json.loads(path.read_text())]
+        report(records, args)
+        return 0
     if args.sizes:
         plan = {case: sorted(args.sizes, reverse=True) for case in args.cases}
     else:
@@ -351,16 +372,67 @@ def main(argv=None) -> int:
                 if records[-1]["status"] != "ok":
                     print(f"  {records[-1]['status']} {records[-1].get('error', '')}",
                           file=sys.stderr)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(records, indent=1))
+    report(records, args)
+    return 0
+
+
+def report(records: list[dict], args) -> None:
+    """The tables, the growth per refinement, the targets and ``--figure``."""
     print_table(records)
-    if args.quads:
+    if any(r.get("quads") for r in records):
         print_quad_table(records)
     print()
     for line in growth(records) + targets(records):
         print(f"- {line}")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(records, indent=1))
-    return 0
+    if args.figure is not None:
+        figure(records, args.figure)
+
+
+def figure(records: list[dict], path: Path) -> None:
+    """End-to-end and solve seconds (log-log, a line ∝ N for reference) and the finest
+    level's Newton steps against the triangles, one colour per case, ranks marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = [r for r in records if r["status"] == "ok"]
+    fig, (seconds, steps) = plt.subplots(1, 2, figsize=(12, 4.8))
+    for colour, case in zip(plt.cm.tab10.colors, dict.fromkeys(r["case"] for r in done),
+                            strict=False):
+        for ranks in sorted({r["ranks"] for r in done if r["case"] == case}):
+            runs = sorted((r for r in done if r["case"] == case and r["ranks"] == ranks),
+                          key=lambda r: r["triangles"])
+            n = [r["triangles"] for r in runs]
+            marker = "o" if ranks == 1 else "s"
+            label = case + ("" if ranks == 1 else f", {ranks} ranks")
+            seconds.loglog(n, [r["total"] for r in runs], marker + "-", color=colour,
+                           label=f"{label}: end to end")
+            seconds.loglog(n, [r["stages"]["solve"] for r in runs], marker + ":",
+                           color=colour, alpha=0.7)
+            steps.semilogx(n, [r["iterations"] for r in runs], marker + "-", color=colour,
+                           label=label)
+    if done:
+        smallest = min(done, key=lambda r: r["triangles"])
+        n = sorted({r["triangles"] for r in done})
+        seconds.loglog(n, [smallest["total"] * m / smallest["triangles"] for m in n], "--",
+                       color="0.6", label="∝ triangles (linear cost)")
+    seconds.set_xlabel("triangles")
+    seconds.set_ylabel("seconds (solid: end to end, dotted: solve)")
+    seconds.grid(True, which="both", alpha=0.3)
+    seconds.legend(fontsize=7)
+    steps.set_xlabel("triangles")
+    steps.set_ylabel("Newton steps on the finest level")
+    steps.set_ylim(bottom=0)
+    steps.grid(True, which="both", alpha=0.3)
+    steps.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
