@@ -1,5 +1,6 @@
 """Finite elements of frame fields (DOLFINx): the P1 space and UFL energies
 (:mod:`~ufl_frames.fem.energy`), the boundary and pinned constraints
 (:mod:`~ufl_frames.fem.constraints`), the frame manifold 𝓜
-(:mod:`~ufl_frames.fem.manifold`) and the energy on it (:mod:`~ufl_frames.fem.problem`).
+(:mod:`~ufl_frames.fem.manifold`), the energy on it (:mod:`~ufl_frames.fem.problem`) and
+the compiled element kernel of its Gauss–Newton matrix (:mod:`~ufl_frames.fem.kernels`).
 """
