@@ -1,15 +1,17 @@
-"""The compiled Gauss–Newton kernel (:mod:`ufl_frames.fem.kernels`) against the UFL form it
-replaces: ∫ J[δq]·J[w] dx + λ (∫ ∇δq:∇w dx + ∫ δq·w dx / A) assembled by FFCx's kernel of
-:func:`energy.gauss_newton_form` plus :func:`hessian.sobolev_form`.
+"""The compiled kernels of the Newton model (:mod:`ufl_frames.fem.kernels`) against the UFL
+forms they replace: ∫ J[δq]·J[w] dx (Gauss–Newton, :func:`energy.gauss_newton_form`) or
+the second derivative of H (UFL's ``derivative`` of its first variation), plus
+λ (∫ ∇δq:∇w dx + ∫ δq·w dx / A) (:func:`hessian.sobolev_form`), assembled by FFCx's kernels.
 
-Truth: the UFL form, an independent derivation (UFL differentiates the bracket of eq. (10);
-the kernel writes J out by hand from the bracket table). Serial and under MPI.
+Truth: the UFL forms, an independent derivation (UFL differentiates the bracket of eq. (10);
+the kernels write J and D²r out by hand from the bracket table). Serial and under MPI.
 """
 
 import dolfinx.fem as fem
 import dolfinx.fem.petsc
 import numpy as np
 import pytest
+import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -28,12 +30,14 @@ def assembled(form):
     return A
 
 
+@pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
 @pytest.mark.parametrize("shape, field", [("piano", "mbo"), ("annulus", "mbo"),
                                           ("piano", "arbitrary")])
-def test_compiled_gauss_newton_matrix_equals_the_ufl_form(shape, field):
+def test_compiled_model_matrix_equals_the_ufl_form(shape, field, exact):
     """The same matrix to round-off, for a frame field (MBO's) and for arbitrary
-    coefficients (J is linear in q whatever q is: no property of frames is used),
-    with a damping that changes between assemblies (the Constants are read each time)."""
+    coefficients (the formulas hold for any q: no property of frames is used; there the
+    residual r, which only the Hessian's second term sees, is large), with a damping that
+    changes between assemblies (the Constants are read each time)."""
     domain = geometry.build(COMM, shape, mesh_size=0.1)
     q = FrameField.initial(domain).q
     if field == "arbitrary":
@@ -45,8 +49,14 @@ def test_compiled_gauss_newton_matrix_equals_the_ufl_form(shape, field):
     area = 1.7
     damping = fem.Constant(V.mesh, PETSc.ScalarType(0.0))
     inverse_area = fem.Constant(V.mesh, PETSc.ScalarType(1.0 / area))
-    reference = fem.form(energy.gauss_newton_form(q) + damping * sobolev_form(V, area))
-    compiled = kernels.damped_gauss_newton_form(q, damping, inverse_area)
+    if exact:
+        H = energy.integrability_energy_form(q)
+        model = ufl.derivative(energy.gradient_form(H, q), q, ufl.TrialFunction(V))
+        compiled = kernels.damped_hessian_form(q, damping, inverse_area)
+    else:
+        model = energy.gauss_newton_form(q)
+        compiled = kernels.damped_gauss_newton_form(q, damping, inverse_area)
+    reference = fem.form(model + damping * sobolev_form(V, area))
     for value in (0.0, 0.37):
         damping.value = value
         A, B = assembled(reference), assembled(compiled)
@@ -59,9 +69,14 @@ def test_compiled_gauss_newton_matrix_equals_the_ufl_form(shape, field):
 
 def test_kernel_source_comes_from_the_bracket_table():
     """Every nonzero entry of the bracket appears once in each of J's two coefficient
-    arrays, and nothing else does."""
+    arrays and once in the Hessian's second term, and nothing else does."""
     from ufl_frames.frames2d.bracket import BRACKET_ENTRIES
 
-    source = kernels.gauss_newton_kernel_source()
-    assert source.count(" * gq[") == len(BRACKET_ENTRIES)
-    assert source.count(" * qp[") == len(BRACKET_ENTRIES)
+    lines = kernels.model_kernel_source().splitlines()
+
+    def count(start, term):
+        return sum(line.count(term) for line in lines if line.lstrip().startswith(start))
+
+    assert count("a[", " * gq[") == len(BRACKET_ENTRIES)
+    assert count("b[", " * qp[") == len(BRACKET_ENTRIES)
+    assert count("{ const double s = weight * r[", "weight * r[") == len(BRACKET_ENTRIES)
