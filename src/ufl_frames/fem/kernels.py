@@ -155,12 +155,19 @@ def model_kernel_source() -> str:
     ])
 
 
+#: The kernel modules this process has loaded, by name (every rank loads in the same
+#: order, so a hit here is a hit on every rank and no collective call is skipped alone).
+_LOADED = {}
+
+
 def _compiled(comm):
-    """The compiled kernel module (collective): built by rank 0 into the JIT cache the
-    first time (named by a hash of the source), then loaded on every rank."""
+    """The compiled kernel module (collective on its first call): built by rank 0 into
+    the JIT cache the first time (named by a hash of the source), loaded on every rank."""
     source = model_kernel_source()
     digest = hashlib.sha256((source + sys.version).encode()).hexdigest()[:16]
     name = f"_ufl_frames_model_kernels_{digest}"
+    if name in _LOADED:
+        return _LOADED[name]
     cache = Path(dolfinx.jit.get_options()["cache_dir"]).expanduser() / "ufl_frames"
     suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
     path = cache / f"{name}{suffix}"
@@ -176,6 +183,7 @@ def _compiled(comm):
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
+    _LOADED[name] = module
     return module
 
 
@@ -186,8 +194,8 @@ def _build(name: str, source: str, cache: Path, path: Path) -> None:
 
     cache.mkdir(parents=True, exist_ok=True)
     ffi = cffi.FFI()
-    ffi.cdef("\n".join(f"void {name}{_ARGUMENTS.replace('restrict ', '')};"
-                        for name in _NAMES.values()))
+    ffi.cdef("\n".join(f"void {function}{_ARGUMENTS.replace('restrict ', '')};"
+                        for function in _NAMES.values()))
     ffi.set_source(name, source, extra_compile_args=["-O2", "-std=c99"])
     with tempfile.TemporaryDirectory(dir=cache) as build:
         built = Path(ffi.compile(tmpdir=build, verbose=False))
