@@ -220,8 +220,8 @@ class GaussNewtonModel:
         second 5N × 5N matrix to add (at 1e5 triangles its MatAXPY took 5 % of a step).
         Both are the hand-written kernels of :mod:`ufl_frames.fem.kernels`: the same
         matrices as the UFL forms (``energy.gauss_newton_form``, the second derivative of
-        H, plus :func:`sobolev_form`) to round-off, assembled in 0.20 s instead of 0.46 /
-        0.48 s at 10⁵ triangles."""
+        H, plus :func:`sobolev_form`) to round-off, assembled in 0.21 / 0.30 s instead of
+        0.46 / 0.48 s at 10⁵ triangles."""
         make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
         return make(self.problem.q, self.damping_weight, self.inverse_area)
 
