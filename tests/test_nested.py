@@ -13,6 +13,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ufl_frames import cli, geometry, solvers
+from ufl_frames.bootstrap import options_scope
 from ufl_frames.fem import energy
 from ufl_frames.fem.transfer import interpolate_field
 from ufl_frames.frames2d import odeco
@@ -60,19 +61,12 @@ def piano_nested():
     return domains, field, levels
 
 
-def nested_with(domains, prefix: str, **options):
-    """FrameField.nested over ``domains`` with PETSc ``options`` under ``prefix``; returns
-    (field, level summaries)."""
-    opts = PETSc.Options()
-    for key, value in options.items():
-        opts[f"{prefix}{key}"] = value
-    try:
-        levels = []
-        field = FrameField.nested(domains, max_it=300, level_monitor=levels.append,
-                                  options_prefix=prefix)
-    finally:
-        for key in options:
-            opts.delValue(f"{prefix}{key}")
+def nested_with(domains, **options):
+    """FrameField.nested over ``domains`` with the PETSc ``options`` set for it alone
+    (:func:`~ufl_frames.bootstrap.options_scope`); returns (field, level summaries)."""
+    levels = []
+    with options_scope(options.items()):
+        field = FrameField.nested(domains, max_it=300, level_monitor=levels.append)
     return field, levels
 
 
@@ -81,7 +75,7 @@ def piano_nested_to_the_gradient_test(piano_nested):
     """The same levels with the finest one solved to the gradient test alone
     (``-frames_nested_rtol 0``: no stop at the discretisation's accuracy)."""
     domains = piano_nested[0]
-    return (domains, *nested_with(domains, "nested_full_", frames_nested_rtol=0.0))
+    return (domains, *nested_with(domains, frames_nested_rtol=0.0))
 
 
 def test_nested_ends_converged_on_the_fine_mesh(piano_nested_to_the_gradient_test):
@@ -111,8 +105,8 @@ def test_nested_fine_level_stops_at_the_discretisation_accuracy():
     steps; at h = 0.2 / 0.1 the gradient test comes first)."""
     domains = [geometry.build(COMM, "piano", mesh_size=0.05, size_factor=2.0 ** k)
                for k in (1, 0)]
-    field, levels = nested_with(domains, "nested_default_")
-    full, full_levels = nested_with(domains, "nested_full_", frames_nested_rtol=0.0)
+    field, levels = nested_with(domains)
+    full, full_levels = nested_with(domains, frames_nested_rtol=0.0)
     assert [e["H"] for e in levels[:-1]] == pytest.approx([e["H"] for e in full_levels[:-1]],
                                                          rel=1e-12)
     stopped, converged = field.result, full.result

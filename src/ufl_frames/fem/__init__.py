@@ -2,5 +2,5 @@
 (:mod:`~ufl_frames.fem.energy`), the boundary and pinned constraints
 (:mod:`~ufl_frames.fem.constraints`), the frame manifold 𝓜
 (:mod:`~ufl_frames.fem.manifold`), the energy on it (:mod:`~ufl_frames.fem.problem`) and
-the compiled element kernel of its Gauss–Newton matrix (:mod:`~ufl_frames.fem.kernels`).
+the compiled element kernels of its Newton model's matrices (:mod:`~ufl_frames.fem.kernels`).
 """

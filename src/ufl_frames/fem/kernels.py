@@ -24,6 +24,7 @@ same matrices as the UFL forms (tested to round-off), assembled by DOLFINx into 
 in 0.21 / 0.30 s instead of 0.46 / 0.48 s at 10⁵ triangles (Gauss–Newton / exact).
 """
 
+import functools
 import hashlib
 import importlib.machinery
 import importlib.util
@@ -72,6 +73,7 @@ def _bracket_lines() -> tuple[list[str], list[str], list[str]]:
     return a_lines, b_lines, second
 
 
+@functools.cache
 def model_kernel_source() -> str:
     """The C source of the two element kernels (DOLFINx's ``tabulate_tensor`` signature):
     ``ufl_frames_damped_gauss_newton`` and ``ufl_frames_damped_hessian``.
