@@ -124,6 +124,8 @@ def shared_tmp(tmp_path):
         (["-frames_h_rtol", "-1e-4"], ["-frames_h_rtol"]),
         (["-frames_nested_rtol", "-1e-3"], ["-frames_nested_rtol"]),
         (["-frames_nested_rtol", "nan"], ["-frames_nested_rtol"]),
+        (["-frames_active_rounds", "-1"], ["-frames_active_rounds"]),
+        (["-frames_active_rounds", "1.5"], ["-frames_active_rounds"]),
         (["-frames_active_consistent", "maybe"], ["-frames_active_consistent", "true or false"]),
     ],
 )
@@ -156,7 +158,7 @@ def test_supported_tao_types_pass_validation():
     for name, value in [("tao_nls_ksp_type", "gmres"), ("mbo_pc_type", "gamg"),
                         ("tao_ls_type", "armijo"), ("frames_hessian", "exact"),
                         ("frames_gn_damping", "0"), ("tao_max_it", "7"), ("frames_h_rtol", "0"),
-                        ("frames_nested_rtol", "0"),
+                        ("frames_nested_rtol", "0"), ("frames_active_rounds", "0"),
                         ("tao_bncg_type", "gd"), ("tao_monitor", None)]:
         assert petsc_options.petsc_option_problem([(name, value)]) is None, name
     # The last value of an option counts, as in PETSc.

@@ -31,6 +31,7 @@ HESSIANS = ("hybrid", "exact", "gauss_newton")
 #: Options naming a PETSc type, by suffix: ``-mbo_ksp_type``, ``-tao_nls_pc_type``...
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 _POSITIVE_INTS = ("tao_max_it",)
+_NON_NEGATIVE_INTS = ("frames_active_rounds",)
 _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
                        "frames_h_rtol", "frames_nested_rtol", "tao_gatol", "tao_grtol",
                        "tao_gttol")
@@ -61,8 +62,9 @@ def petsc_option_problem(options) -> str | None:
     dash; the last value of a name counts), or None. Needs PETSc (started if it is not).
 
     ``-tao_type`` must be one of :data:`TAO_TYPES`; ``-*ksp_type``, ``-*pc_type`` and
-    ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer; ``-frames_hessian``
-    one of :data:`HESSIANS`; dampings and tolerances finite numbers >= 0; switches
+    ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer;
+    ``-frames_active_rounds`` an integer >= 0; ``-frames_hessian`` one of
+    :data:`HESSIANS`; dampings and tolerances finite numbers >= 0; switches
     (``-frames_gn_adapt``, ``-frames_active_consistent``, ...) true or false.
     """
     values = dict(options.items() if isinstance(options, dict) else options)
@@ -74,7 +76,8 @@ def petsc_option_problem(options) -> str | None:
             continue
         typed = _TYPE_SUFFIX.fullmatch(name)
         checked = typed is not None or name in (
-            "tao_type", "frames_hessian", *_POSITIVE_INTS, *_NON_NEGATIVE_REALS, *_REALS)
+            "tao_type", "frames_hessian", *_POSITIVE_INTS, *_NON_NEGATIVE_INTS,
+            *_NON_NEGATIVE_REALS, *_REALS)
         if not checked:
             continue
         if value is None or str(value).strip() == "":
@@ -93,6 +96,13 @@ def petsc_option_problem(options) -> str | None:
                 return f"-{name} must be a positive integer, got {value!r}"
             if not 0 < number <= MAX_INT:
                 return f"-{name} must be a positive integer at most {MAX_INT}, got {value!r}"
+        elif name in _NON_NEGATIVE_INTS:
+            try:
+                number = int(value)
+            except ValueError:
+                number = -1
+            if not 0 <= number <= MAX_INT:
+                return f"-{name} must be an integer from 0 to {MAX_INT}, got {value!r}"
         elif name in _NON_NEGATIVE_REALS or name in _REALS:
             try:
                 number = float(value)

@@ -48,9 +48,13 @@ HYBRID_SWITCH = 1e-3
 #: :meth:`GaussNewtonModel._hold_active_set`.
 RELEASE_RATIO = 1.0
 #: Factorisations of a face more at most per Newton step in
-#: :meth:`GaussNewtonModel._consistent_active_set` (measured at 10⁵ triangles: 2 rounds
-#: as few Newton steps as 4 or 6, with fewer factorisations).
-CONSISTENT_ROUNDS = 2
+#: :meth:`GaussNewtonModel._consistent_active_set` (``-frames_active_rounds r``). Measured
+#: on the non-isotropic piano (benchmarks/README): 2 rounds took as few Newton steps as 4
+#: or 6, with fewer factorisations; 1 round as few as 2, with 1.44 factorisations a step
+#: instead of 1.79 at 2.5·10⁵ triangles on 2 ranks (197.1 s against 221.9 s end to end,
+#: H 1 % lower) and 62.3 s against 63.9 s at 10⁵ serially; 0 rounds more steps (42
+#: against 24 on the finest level at 10⁴ triangles, 83.0 s at 10⁵, H 10 % higher).
+CONSISTENT_ROUNDS = 1
 #: … and none where the step pushes no more than this fraction of the held frames off the
 #: bound: those the retraction clamps, and the step's releases wait for the next Newton
 #: step (10⁵ triangles: 100.0 s of solve; 118.3 s when a release always ran a round;
@@ -194,9 +198,11 @@ class GaussNewtonModel:
                  damping: float = DEFAULT_DAMPING,
                  damping_min: float = 1e-3, exact: bool = False, adapt: bool = False,
                  release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True,
-                 switch: float | None = None, consistent: bool = False):
+                 switch: float | None = None, consistent: bool = False,
+                 rounds: int = CONSISTENT_ROUNDS):
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.consistent = consistent  # see _consistent_active_set
+        self.rounds = rounds  # refactorisations at most per step there
         self.bound_rounds = []  # (released, pushed) per round of the last step
         self.released = None  # the releases the last step left to the next one
         self.switch = None if exact else switch  # see _switch
@@ -507,9 +513,11 @@ class GaussNewtonModel:
         From the face of :meth:`_start_active_set`, the step δ on the current face is
         factorised and solved; the first round releases the held frames whose multiplier
         is negative and holds the frames δ pushes off the bound, later rounds (at most
-        :data:`CONSISTENT_ROUNDS` factorisations more, none for a few pushed frames:
+        ``rounds`` factorisations more, ``-frames_active_rounds``, default
+        :data:`CONSISTENT_ROUNDS`; none for a few pushed frames:
         :data:`CONSISTENT_TOLERANCE`) only hold pushed ones, so the set settles. Where no
-        round follows the first, its releases are left to the next Newton step
+        round follows the first (few frames pushed, or ``rounds`` = 0), its releases are
+        left to the next Newton step
         (:attr:`released`, see :meth:`_start_active_set`): a refactorisation for a few
         released frames cost more than the step they wait (at 10⁵ triangles 100.0 s
         against 118.3 s of solve, the same steps and H). ``g`` follows the face.
@@ -532,7 +540,7 @@ class GaussNewtonModel:
         ksp.setOperators(H, P)
         step, product = g.duplicate(), g.duplicate()
         try:
-            for round_ in range(CONSISTENT_ROUNDS + 1):
+            for round_ in range(self.rounds + 1):
                 pc.setUp()
                 pushed = self._pushed_off_bound(pc, g, step) & ~held[:n]
                 released = np.zeros(n, dtype=bool)
@@ -546,12 +554,13 @@ class GaussNewtonModel:
                 counts = (comm.allreduce(int(np.count_nonzero(released)), op=MPI.SUM),
                           comm.allreduce(int(np.count_nonzero(pushed)), op=MPI.SUM))
                 self.bound_rounds.append(counts)
-                if counts == (0, 0) or round_ == CONSISTENT_ROUNDS:
+                if counts == (0, 0):
                     break
                 held_count = comm.allreduce(int(np.count_nonzero(self.active[:n])), op=MPI.SUM)
-                if counts[1] <= CONSISTENT_TOLERANCE * held_count:
-                    # a few frames clamped by the retraction cost less than a round, and
-                    # the released frames can wait for the next step's face
+                if round_ == self.rounds or counts[1] <= CONSISTENT_TOLERANCE * held_count:
+                    # a few frames clamped by the retraction cost less than a round (or no
+                    # round is left), and the released frames can wait for the next
+                    # step's face (only the first round releases)
                     if counts[0]:
                         self.released = np.zeros(rows.shape[0], dtype=bool)
                         self.released[:n] = released

@@ -43,7 +43,8 @@ on round-off. TAO types:
   see :func:`newton_pc_options`); the Gauss–Newton
   damping adapts to the line search (``-frames_gn_adapt``) and the aspect bound's active
   set is decided with the Newton step itself (``nls``: ``-frames_active_consistent``, on
-  by default), otherwise held until releasing it pays
+  by default, with at most ``-frames_active_rounds r`` refactorisations a step, default
+  1), otherwise held until releasing it pays
   (``-frames_active_release η``, 0 to turn off);
   with the aspect bound, ``nls`` backtracks (``-tao_ls_type armijo``, see
   :data:`BOUNDED_OPTIONS`);
@@ -70,6 +71,7 @@ from petsc4py import PETSc  # noqa: E402
 from ufl_frames.fem.problem import FrameProblem  # noqa: E402
 from ufl_frames.petsc_options import HESSIANS, TAO_TYPES  # noqa: E402
 from ufl_frames.solvers.hessian import (  # noqa: E402
+    CONSISTENT_ROUNDS,
     DEFAULT_DAMPING,
     HYBRID_SWITCH,
     RELEASE_RATIO,
@@ -553,6 +555,7 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
                 release=opts.getReal("frames_active_release",
                                      0.0 if consistent else RELEASE_RATIO),
                 consistent=consistent,
+                rounds=opts.getInt("frames_active_rounds", CONSISTENT_ROUNDS),
                 bound_steps=opts.getBool("frames_gn_adapt_bound", True),
                 exact=hessian == "exact", lean=lean,
                 switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
