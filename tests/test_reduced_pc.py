@@ -192,3 +192,28 @@ def test_ptap_equals_the_dense_product_and_leaves_the_options_as_they_were(via, 
         np.testing.assert_allclose(R[lo:hi, :], 2 * expected[lo:hi], atol=1e-12)
     for mat in (A, P, R):
         mat.destroy()
+
+
+@pytest.mark.skipif(not PETSc.Sys.hasExternalPackage("mumps"), reason="MUMPS's BLR")
+def test_block_low_rank_factorisation_takes_the_full_rank_steps():
+    """The default factorises the reduced matrix with MUMPS's block low-rank compression
+    (threshold :data:`MUMPS_BLR_TOLERANCE`); the non-isotropic piano at h = 0.05 takes the
+    same steps as with the full-rank factorisation (``..._icntl_35 0``): H and |g| at every
+    step to 1e-8, the same Krylov counts."""
+    from ufl_frames.solvers.tao import MUMPS_BLR_TOLERANCE, newton_pc_options
+
+    defaults = newton_pc_options("nls", COMM)
+    assert defaults["tao_nls_reduced_mat_mumps_icntl_35"] == "1"
+    assert float(defaults["tao_nls_reduced_mat_mumps_cntl_7"]) == MUMPS_BLR_TOLERANCE
+    domain = geometry.build(COMM, "piano", mesh_size=0.05)
+    runs = []
+    for options in ({}, {"tao_nls_reduced_mat_mumps_icntl_35": "0"}):
+        with options_scope(options.items()):
+            runs.append(FrameField.initial(domain).solve(max_it=500))
+    blr, full = runs
+    assert blr.converged_reason.startswith("CONVERGED"), blr.converged_reason
+    assert len(blr.history) == len(full.history) > 5
+    for x, y in zip(blr.history, full.history, strict=True):
+        assert x["H"] == pytest.approx(y["H"], rel=1e-8)
+        assert x["gnorm"] == pytest.approx(y["gnorm"], rel=1e-6, abs=1e-12)
+    assert blr.krylov_iterations == full.krylov_iterations
