@@ -30,8 +30,8 @@ TAO_TYPES = (
 HESSIANS = ("hybrid", "exact", "gauss_newton")
 #: Options naming a PETSc type, by suffix: ``-mbo_ksp_type``, ``-tao_nls_pc_type``...
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
-_POSITIVE_INTS = ("tao_max_it",)
-_NON_NEGATIVE_INTS = ("frames_active_rounds",)
+#: Integer options and their least value.
+_INTS = {"tao_max_it": 1, "frames_active_rounds": 0}
 _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
                        "frames_h_rtol", "frames_nested_rtol", "tao_gatol", "tao_grtol",
                        "tao_gttol")
@@ -76,8 +76,7 @@ def petsc_option_problem(options) -> str | None:
             continue
         typed = _TYPE_SUFFIX.fullmatch(name)
         checked = typed is not None or name in (
-            "tao_type", "frames_hessian", *_POSITIVE_INTS, *_NON_NEGATIVE_INTS,
-            *_NON_NEGATIVE_REALS, *_REALS)
+            "tao_type", "frames_hessian", *_INTS, *_NON_NEGATIVE_REALS, *_REALS)
         if not checked:
             continue
         if value is None or str(value).strip() == "":
@@ -89,20 +88,15 @@ def petsc_option_problem(options) -> str | None:
         elif name == "frames_hessian":
             if value not in HESSIANS:
                 return f"-frames_hessian must be one of {', '.join(HESSIANS)}, got {value!r}"
-        elif name in _POSITIVE_INTS:
+        elif name in _INTS:
+            least = _INTS[name]
+            kind = "a positive integer" if least == 1 else f"an integer >= {least}"
             try:
                 number = int(value)
             except ValueError:
-                return f"-{name} must be a positive integer, got {value!r}"
-            if not 0 < number <= MAX_INT:
-                return f"-{name} must be a positive integer at most {MAX_INT}, got {value!r}"
-        elif name in _NON_NEGATIVE_INTS:
-            try:
-                number = int(value)
-            except ValueError:
-                number = -1
-            if not 0 <= number <= MAX_INT:
-                return f"-{name} must be an integer from 0 to {MAX_INT}, got {value!r}"
+                return f"-{name} must be {kind}, got {value!r}"
+            if not least <= number <= MAX_INT:
+                return f"-{name} must be {kind} at most {MAX_INT}, got {value!r}"
         elif name in _NON_NEGATIVE_REALS or name in _REALS:
             try:
                 number = float(value)
