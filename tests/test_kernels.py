@@ -80,3 +80,81 @@ def test_kernel_source_comes_from_the_bracket_table():
     assert count("a[", " * gq[") == len(BRACKET_ENTRIES)
     assert count("b[", " * qp[") == len(BRACKET_ENTRIES)
     assert count("{ const double s = weight * r[", "weight * r[") == len(BRACKET_ENTRIES)
+
+
+def _block_columns(blocks, V):
+    """The owned (n, 5, c) blocks as a PETSc matrix with 5 rows and c columns a vertex."""
+    from ufl_frames.solvers.hessian import _block_diagonal
+
+    return _block_diagonal(blocks, V.dofmap.index_map, V.mesh.comm)
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
+@pytest.mark.parametrize("columns", [3, 2])
+def test_reduced_model_matrix_equals_the_product_with_the_basis(columns, exact):
+    """Tᵀ A T assembled with the reduced kernel equals PETSc's product Pᵀ A P of the 5N
+    matrix (itself tested against UFL above) with a block-diagonal T: arbitrary 5 × c
+    blocks a vertex, a zero column at some vertices (an absent direction), in parallel
+    with the ghost vertices' blocks from their owners."""
+    domain = geometry.build(COMM, "piano", mesh_size=0.1)
+    q = FrameField.initial(domain).q
+    V, mesh = q.function_space, q.function_space.mesh
+    n = V.dofmap.index_map.size_local
+    damping = fem.Constant(mesh, PETSc.ScalarType(0.37))
+    inverse_area = fem.Constant(mesh, PETSc.ScalarType(0.6))
+    global_vertex = V.dofmap.index_map.local_to_global(np.arange(n, dtype=np.int32))
+    blocks = np.sin(np.arange(5 * columns)[None, :] + 0.7 * global_vertex[:, None]).reshape(
+        n, 5, columns)
+    blocks[global_vertex % 7 == 0, :, -1] = 0.0
+    basis = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (5 * columns,))))
+    basis.x.array.reshape(-1, 5, columns)[:n] = blocks
+    basis.x.scatter_forward()
+    space = fem.functionspace(mesh, ("Lagrange", 1, (columns,)))
+    reduced = assembled(kernels.reduced_model_form(q, basis, space, damping, inverse_area,
+                                                   exact))
+    make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
+    full = assembled(make(q, damping, inverse_area))
+    T = _block_columns(blocks, V)
+    product = full.PtAP(T)
+    scale = product.norm(PETSc.NormType.FROBENIUS)
+    product.axpy(-1.0, reduced, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert product.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    for matrix in (reduced, full, T, product):
+        matrix.destroy()
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
+def test_model_action_equals_the_matrix_product(exact):
+    """The vector of :func:`kernels.model_action_form` equals the 5N matrix times the
+    field, on an arbitrary direction, serial and in parallel (ghost sums added)."""
+    domain = geometry.build(COMM, "annulus", mesh_size=0.1)
+    q = FrameField.initial(domain).q
+    V, mesh = q.function_space, q.function_space.mesh
+    damping = fem.Constant(mesh, PETSc.ScalarType(0.2))
+    inverse_area = fem.Constant(mesh, PETSc.ScalarType(1.3))
+    direction = fem.Function(V)
+    x = V.tabulate_dof_coordinates()
+    direction.x.array[:] = np.cos(np.arange(5)[None, :] + 4.0 * x[:, :1] * x[:, 1:2]).ravel()
+    form = kernels.model_action_form(q, direction, damping, inverse_area, exact)
+    b = dolfinx.fem.petsc.assemble_vector(form)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
+    A = assembled(make(q, damping, inverse_area))
+    reference = A.createVecLeft()
+    A.mult(direction.x.petsc_vec, reference)
+    scale = reference.norm()
+    reference.axpy(-1.0, b)
+    assert reference.norm() <= 1e-13 * scale
+    for obj in (b, A, reference):
+        obj.destroy()
+
+
+def test_reduced_form_rejects_a_basis_of_the_wrong_shape():
+    domain = geometry.build(COMM, "annulus", mesh_size=0.2)
+    q = FrameField.initial(domain).q
+    mesh = q.function_space.mesh
+    constant = fem.Constant(mesh, PETSc.ScalarType(1.0))
+    basis = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (12,))))
+    space = fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    with pytest.raises(ValueError, match="tangent basis"):
+        kernels.reduced_model_form(q, basis, space, constant, constant)

@@ -45,9 +45,16 @@ from petsc4py import PETSc  # noqa: E402
 from ufl_frames.fem.energy import check_frame_function  # noqa: E402
 from ufl_frames.frames2d.bracket import BRACKET_ENTRIES  # noqa: E402
 
-__all__ = ["model_kernel_source", "damped_gauss_newton_form", "damped_hessian_form"]
+__all__ = ["model_kernel_source", "damped_gauss_newton_form", "damped_hessian_form",
+           "reduced_model_form", "model_action_form"]
 
 _NAMES = {False: "ufl_frames_damped_gauss_newton", True: "ufl_frames_damped_hessian"}
+#: The same in reduced tangent coordinates, by (exact, columns of the basis).
+_REDUCED_NAMES = {(exact, nc): f"{_NAMES[exact]}_reduced{nc}"
+                  for exact in (False, True) for nc in (2, 3)}
+#: The same matrices' products with a field (linear forms).
+_ACTION_NAMES = {exact: f"{_NAMES[exact]}_action" for exact in (False, True)}
+_ALL_NAMES = (*_NAMES.values(), *_REDUCED_NAMES.values(), *_ACTION_NAMES.values())
 _ARGUMENTS = ("(double* restrict A, const double* restrict w, const double* restrict c, "
               "const double* restrict coordinate_dofs, const int* restrict entity_local_index, "
               "const uint8_t* restrict quadrature_permutation, void* custom_data)")
@@ -153,6 +160,57 @@ def model_kernel_source() -> str:
             "{",
             f"  model(A, w, c, coordinate_dofs, {int(exact)});",
             "}")],
+        "/* the element matrix in tangent coordinates: Tᵀ A T, T = diag(T_0, T_1, T_2) with",
+        "   T_v (5 × nc, row-major) the scaled tangent basis of vertex v, after q in w */",
+        "static inline void reduced(double* restrict R, const double* restrict w,",
+        "                           const double* restrict c, const double* restrict x,",
+        "                           const int exact, const int nc)",
+        "{",
+        "  double A[225] = {0};",
+        "  model(A, w, c, x, exact);",
+        "  const double* restrict T = w + 15;",
+        "  const int m = 3 * nc;",
+        "  double AT[15 * 9];  /* A T: 15 × 3 nc */",
+        "  for (int r = 0; r < 15; ++r)",
+        "    for (int u = 0; u < 3; ++u)",
+        "      for (int l = 0; l < nc; ++l)",
+        "      {",
+        "        double s = 0.0;",
+        "        for (int n = 0; n < 5; ++n)",
+        "          s += A[15 * r + 5 * u + n] * T[5 * nc * u + nc * n + l];",
+        "        AT[m * r + nc * u + l] = s;",
+        "      }",
+        "  for (int v = 0; v < 3; ++v)",
+        "    for (int k = 0; k < nc; ++k)",
+        "      for (int j = 0; j < m; ++j)",
+        "      {",
+        "        double s = 0.0;",
+        "        for (int n = 0; n < 5; ++n)",
+        "          s += T[5 * nc * v + nc * n + k] * AT[m * (5 * v + n) + j];",
+        "        R[m * (nc * v + k) + j] += s;",
+        "      }",
+        "}",
+        "/* the model's product with a field d (after q in w): b = A d */",
+        "static inline void action(double* restrict b, const double* restrict w,",
+        "                          const double* restrict c, const double* restrict x,",
+        "                          const int exact)",
+        "{",
+        "  double A[225] = {0};",
+        "  model(A, w, c, x, exact);",
+        "  for (int r = 0; r < 15; ++r)",
+        "    for (int s = 0; s < 15; ++s)",
+        "      b[r] += A[15 * r + s] * w[15 + s];",
+        "}",
+        *[line for (exact, nc), name in _REDUCED_NAMES.items() for line in (
+            f"void {name}{_ARGUMENTS}",
+            "{",
+            f"  reduced(A, w, c, coordinate_dofs, {int(exact)}, {nc});",
+            "}")],
+        *[line for exact, name in _ACTION_NAMES.items() for line in (
+            f"void {name}{_ARGUMENTS}",
+            "{",
+            f"  action(A, w, c, coordinate_dofs, {int(exact)});",
+            "}")],
         "",
     ])
 
@@ -197,7 +255,7 @@ def _build(name: str, source: str, cache: Path, path: Path) -> None:
     cache.mkdir(parents=True, exist_ok=True)
     ffi = cffi.FFI()
     ffi.cdef("\n".join(f"void {function}{_ARGUMENTS.replace('restrict ', '')};"
-                        for function in _NAMES.values()))
+                        for function in _ALL_NAMES))
     ffi.set_source(name, source, extra_compile_args=["-O2", "-std=c99"])
     with tempfile.TemporaryDirectory(dir=cache) as build:
         built = Path(ffi.compile(tmpdir=build, verbose=False))
@@ -221,19 +279,75 @@ def damped_hessian_form(q: fem.Function, damping: fem.Constant,
     return _damped_form(q, damping, inverse_area, exact=True)
 
 
+def reduced_model_form(q: fem.Function, basis: fem.Function, space: fem.FunctionSpace,
+                       damping: fem.Constant, inverse_area: fem.Constant,
+                       exact: bool = False) -> fem.Form:
+    """The model's matrix of :func:`damped_gauss_newton_form` (``exact``:
+    :func:`damped_hessian_form`) in tangent coordinates, Tᵀ A T, assembled directly: no
+    5N × 5N matrix and no product Pᵀ A P (the reduced matrix of
+    :class:`~ufl_frames.solvers.hessian.GaussNewtonModel`).
+
+    ``basis`` is a P1 function with 5·c components a vertex, the 5 × c matrix T_v row-major
+    (c = 3 tangent directions of non-isotropic frames, 2 isotropic; a zero column where a
+    direction is absent gives a zero row and column); ``space`` the P1 space of c
+    components the matrix acts on. Both must number the vertices as ``q``'s space does,
+    so that the reduced unknown (v, k) pairs with column k of T_v.
+    """
+    check_frame_function(q)
+    V = q.function_space
+    columns = basis.function_space.dofmap.index_map_bs // 5
+    if (columns not in (2, 3) or basis.function_space.dofmap.index_map_bs != 5 * columns
+            or space.dofmap.index_map_bs != columns):
+        raise ValueError(f"a tangent basis of 2 or 3 columns and a space of as many "
+                         f"components, not {basis.function_space.dofmap.index_map_bs} "
+                         f"and {space.dofmap.index_map_bs}")
+    for other in (basis.function_space, space):
+        _check_same_vertices(V, other)
+    return _compiled_form(_REDUCED_NAMES[(exact, columns)], [space, space], [q, basis],
+                          [damping, inverse_area])
+
+
+def model_action_form(q: fem.Function, direction: fem.Function, damping: fem.Constant,
+                      inverse_area: fem.Constant, exact: bool = False) -> fem.Form:
+    """The vector A d of the matrix A of :func:`damped_gauss_newton_form` (``exact``:
+    :func:`damped_hessian_form`) and a P1 field ``direction`` d of ``q``'s space, without
+    A (a linear form, the element matrix applied in the kernel)."""
+    check_frame_function(q)
+    _check_same_vertices(q.function_space, direction.function_space)
+    if direction.function_space.dofmap.index_map_bs != q.function_space.dofmap.index_map_bs:
+        raise ValueError("the direction must have the frame field's 5 components")
+    return _compiled_form(_ACTION_NAMES[exact], [q.function_space], [q, direction],
+                          [damping, inverse_area])
+
+
+def _check_same_vertices(V: fem.FunctionSpace, W: fem.FunctionSpace) -> None:
+    """Raise ValueError unless the P1 spaces V and W number the mesh's vertices alike."""
+    a, b = V.dofmap.index_map, W.dofmap.index_map
+    if (V.mesh is not W.mesh or a.size_local != b.size_local or a.num_ghosts != b.num_ghosts
+            or not np.array_equal(V.dofmap.list, W.dofmap.list)):
+        raise ValueError("the spaces do not number the mesh's vertices alike")
+
+
 def _damped_form(q, damping, inverse_area, exact: bool) -> fem.Form:
     check_frame_function(q)
     V = q.function_space
-    mesh = V.mesh
+    return _compiled_form(_NAMES[exact], [V, V], [q], [damping, inverse_area])
+
+
+def _compiled_form(name: str, spaces, coefficients, constants) -> fem.Form:
+    """A DOLFINx form over the owned cells whose kernel is the compiled function ``name``
+    (collective: compiles once)."""
+    mesh = coefficients[0].function_space.mesh
     module = _compiled(mesh.comm)
-    kernel = module.ffi.addressof(module.lib, _NAMES[exact])
+    kernel = module.ffi.addressof(module.lib, name)
     pointer = int(module.ffi.cast("uintptr_t", kernel))
     cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
     # (position in the flattened list of integrals, kernel, cells, active coefficients)
-    integrals = {fem.IntegralType.cell: [(0, pointer, cells, np.array([0], dtype=np.int8))]}
+    active = np.arange(len(coefficients), dtype=np.int8)
+    integrals = {fem.IntegralType.cell: [(0, pointer, cells, active)]}
     form = fem.form_cpp_class(PETSc.ScalarType)(
-        [V._cpp_object, V._cpp_object], integrals, [q._cpp_object],
-        [damping._cpp_object, inverse_area._cpp_object], False, [], mesh._cpp_object)
+        [V._cpp_object for V in spaces], integrals, [f._cpp_object for f in coefficients],
+        [c._cpp_object for c in constants], False, [], mesh._cpp_object)
     compiled = fem.Form(form)
     compiled._kernel_module = module  # keeps the library loaded as long as the form lives
     return compiled

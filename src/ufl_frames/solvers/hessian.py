@@ -192,7 +192,7 @@ class GaussNewtonModel:
     #: The PETSc objects the model owns (destroyed by :meth:`free`).
     _OWNED = ("shell", "assembled", "unshifted", "gauss_newton", "unscale", "xhat",
               "work", "tangent", "normal", "curvature", "basis_matrix", "reduced_matrix",
-              "reduced_curvature", "absent", "lean_t", "lean_u", "lean_w")
+              "reduced_curvature", "absent", "lean_t", "lean_u", "lean_w", "product_vector")
 
     def __init__(self, problem: FrameProblem, template: PETSc.Vec,
                  damping: float = DEFAULT_DAMPING,
@@ -227,7 +227,15 @@ class GaussNewtonModel:
         Both are the hand-written kernels of :mod:`ufl_frames.fem.kernels`: the same
         matrices as the UFL forms (``energy.gauss_newton_form``, the second derivative of
         H, plus :func:`sobolev_form`) to round-off, assembled in 0.21 / 0.30 s instead of
-        0.46 / 0.48 s at 10⁵ triangles."""
+        0.46 / 0.48 s at 10⁵ triangles.
+
+        The lean model assembles the reduced matrix Tᵀ G T itself
+        (:func:`kernels.reduced_model_form`, T scaled by W⁻¹), with no 5N × 5N matrix G
+        and no PtAP product (see :meth:`_build_reduced`)."""
+        if self.lean:
+            return kernels.reduced_model_form(self.problem.q, self.scaled_basis,
+                                              self.reduced_space,
+                                              self.damping_weight, self.inverse_area, exact)
         make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
         return make(self.problem.q, self.damping_weight, self.inverse_area)
 
@@ -236,8 +244,17 @@ class GaussNewtonModel:
         mesh = problem.q.function_space.mesh
         self.damping_weight = fem.Constant(mesh, PETSc.ScalarType(0.0))
         self.inverse_area = fem.Constant(mesh, PETSc.ScalarType(1.0 / problem.area))
+        if self.lean:  # the reduced matrix's space and the basis T W⁻¹ (5 × c a vertex)
+            columns = len(self._columns())
+            self.scaled_basis = fem.Function(fem.functionspace(
+                mesh, ("Lagrange", 1, (odeco.NUM_COEFFICIENTS * columns,))))
+            self.reduced_space = fem.functionspace(mesh, ("Lagrange", 1, (columns,)))
+        self.product_form, self.direction = None, None  # see _model_product
         self.form = self._model_form(self.exact)
-        self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
+        if self.lean:
+            self.reduced_matrix = dolfinx.fem.petsc.create_matrix(self.form)
+        else:
+            self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
         inverse = 1.0 / problem.sqrt_mass[: problem.owned]
         self.unscale.getArray()[:] = np.repeat(inverse, odeco.NUM_COEFFICIENTS)
@@ -267,10 +284,11 @@ class GaussNewtonModel:
         ratio = 1.0 if gnorm is None else min(1.0, gnorm / self.gnorm0)
         self.lam = self.damping * self.adaptation * max(self.damping_min, ratio) * scale
         self.damping_weight.value = self.lam
-        G.zeroEntries()
-        dolfinx.fem.petsc.assemble_matrix(G, self.form)
-        G.assemble()
-        G.diagonalScale(self.unscale, self.unscale)
+        if not self.lean:  # the lean model assembles Tᵀ G T in _build_reduced instead
+            G.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(G, self.form)
+            G.assemble()
+            G.diagonalScale(self.unscale, self.unscale)
         return self._assemble_tangent(result, evaluation)
 
     def _assemble_tangent(self, result, evaluation: Evaluation):
@@ -363,16 +381,36 @@ class GaussNewtonModel:
         self.reduced_shift = self.shift_value
         return self.basis_matrix, self.reduced_matrix
 
+    def _columns(self) -> list[int]:
+        """The tangent basis' columns that are unknowns of R: e_s, e_d and the rotation;
+        isotropic frames have no e_d."""
+        return [0, 2] if self.problem.constraints.isotropic else [0, 1, 2]
+
     def _build_reduced(self) -> None:
-        """T and R = Tᵀ G T (+ the reduced curvature) + μ E from the last assembly, no
-        shift; μ from the trace of Tᵀ G T where it is not known yet (lean model)."""
+        """T and R = Tᵀ G T (+ the reduced curvature) + μ E at the current q and basis, no
+        shift; μ from the trace of Tᵀ G T where it is not known yet (lean model).
+
+        The lean model assembles Tᵀ G T (G in x = W q: Tᵀ W⁻¹ G_q W⁻¹ T) with the kernel of
+        :func:`kernels.reduced_model_form`, the others as the product Pᵀ G P of their
+        assembled 5N × 5N G. Per element 9 × 9 values instead of 15 × 15, and no PtAP:
+        measured in benchmarks/README ("The reduced matrix assembled directly")."""
         problem = self.problem
-        columns = [0, 2] if problem.constraints.isotropic else [0, 1, 2]
-        basis = self._basis[:, :, columns]
+        basis = self._basis[:, :, self._columns()]
         index_map = problem.q.function_space.dofmap.index_map
         comm = problem.constraints.comm
+        n = problem.owned
         self.basis_matrix = _block_diagonal(basis, index_map, comm, self.basis_matrix)
-        self.reduced_matrix = _ptap(self.gauss_newton, self.basis_matrix, self.reduced_matrix)
+        if self.lean:
+            R = self.reduced_matrix
+            scaled = self.scaled_basis.x.array.reshape(-1, *basis.shape[1:])
+            scaled[:n] = basis / problem.sqrt_mass[:n, None, None]
+            self.scaled_basis.x.scatter_forward()  # ghosts: the owner's active set
+            R.zeroEntries()
+            dolfinx.fem.petsc.assemble_matrix(R, self.form)
+            R.assemble()
+        else:
+            self.reduced_matrix = _ptap(self.gauss_newton, self.basis_matrix,
+                                        self.reduced_matrix)
         missing = np.linalg.norm(basis, axis=1) == 0  # (n, c)
         if self.mu is None:
             trace = self.reduced_matrix.getDiagonal()
@@ -545,7 +583,7 @@ class GaussNewtonModel:
                 pushed = self._pushed_off_bound(pc, g, step) & ~held[:n]
                 released = np.zeros(n, dtype=bool)
                 if round_ == 0:
-                    self.gauss_newton.mult(step, product)  # G (−δ)
+                    self._model_product(step, product)  # G (−δ)
                     model_gradient = unbounded - product.getArray(readonly=True).reshape(
                         -1, odeco.NUM_COEFFICIENTS)
                     # the multiplier ≥ 0 where the model gradient still pushes outwards
@@ -574,6 +612,34 @@ class GaussNewtonModel:
             step.destroy()
             product.destroy()
         pc.setUp()
+
+    def _model_product(self, v: PETSc.Vec, y: PETSc.Vec) -> None:
+        """y = G v, G the damped model's matrix (in x, without the tangent projections) at
+        the last assembly: the 5N × 5N matrix's product, or where the lean model has no
+        such matrix, the vector of :func:`kernels.model_action_form` (G_x = W⁻¹ G_q W⁻¹)."""
+        if not self.lean:
+            self.gauss_newton.mult(v, y)
+            return
+        problem, n = self.problem, self.problem.owned
+        if self.direction is None:
+            self.direction = fem.Function(problem.q.function_space)
+        if self.product_form is None or self.product_form[0] != self.exact:
+            form = kernels.model_action_form(problem.q, self.direction, self.damping_weight,
+                                             self.inverse_area, self.exact)
+            self.product_form = (self.exact, form)
+            if self.product_vector is None:
+                self.product_vector = dolfinx.fem.petsc.create_vector(problem.q.function_space)
+        sqrt_mass = problem.sqrt_mass[:n, None]
+        d = self.direction.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
+        d[:n] = v.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS) / sqrt_mass
+        self.direction.x.scatter_forward()
+        b = self.product_vector
+        with b.localForm() as local:
+            local.set(0.0)
+        dolfinx.fem.petsc.assemble_vector(b, self.product_form[1])
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        y.getArray()[:] = (b.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS)
+                           / sqrt_mass).ravel()
 
     def _free_basis(self) -> np.ndarray | None:
         """The tangent basis at the current q with the aspect bound's active set decided by
