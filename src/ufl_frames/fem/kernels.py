@@ -80,24 +80,10 @@ def _bracket_lines() -> tuple[list[str], list[str], list[str]]:
     return a_lines, b_lines, second
 
 
-@functools.cache
-def model_kernel_source() -> str:
-    """The C source of the two element kernels (DOLFINx's ``tabulate_tensor`` signature):
-    ``ufl_frames_damped_gauss_newton`` and ``ufl_frames_damped_hessian``.
-
-    Per triangle: ``w`` the 3 × 5 Odeco coefficients of q at its vertices (vertex-major),
-    ``c`` = (λ, 1/A), ``coordinate_dofs`` its 3 vertices (x, y, z). ``A`` (15 × 15,
-    row-major, zeroed by DOLFINx) receives Σ_points (area/3) J[φ_s]·J[φ_r] (+ r · D²r[φ_s,
-    φ_r] for the Hessian, r = [u, v] at the point) + λ (K_rs + M_rs/A) δ_components.
-    """
-    a_lines, b_lines, second = _bracket_lines()
-    return "\n".join([
-        "#include <math.h>",
-        "#include <stdint.h>",
-        "static inline void model(double* restrict A, const double* restrict w,",
-        "                         const double* restrict c, const double* restrict x,",
-        "                         const int exact)",
-        "{",
+def _geometry_lines(a_lines: list[str]) -> list[str]:
+    """C statements: the triangle's gradients of the hat functions dphi, area, ∇q (gq),
+    J's first coefficient array a and the quadrature rule (phi, weight)."""
+    return [
         "  const double e1x = x[3] - x[0], e1y = x[4] - x[1];",
         "  const double e2x = x[6] - x[0], e2y = x[7] - x[1];",
         "  const double det = e1x * e2y - e1y * e2x, area = 0.5 * fabs(det);",
@@ -114,8 +100,13 @@ def model_kernel_source() -> str:
         "  /* the edge midpoints: the rule of degree 2 with weights area / 3 */",
         "  static const double phi[3][3] = {{0.5, 0.5, 0.0}, {0.0, 0.5, 0.5}, {0.5, 0.0, 0.5}};",
         "  const double weight = area / 3.0;",
-        "  for (int p = 0; p < 3; ++p)",
-        "  {",
+    ]
+
+
+def _point_lines(b_lines: list[str]) -> list[str]:
+    """C statements at quadrature point p: q there (qp), J's second coefficient array b
+    and J (2 × 15: the bracket's linearisation at the 15 basis functions)."""
+    return [
         "    double qp[5];",
         "    for (int l = 0; l < 5; ++l)",
         "      qp[l] = phi[p][0] * w[l] + phi[p][1] * w[5 + l] + phi[p][2] * w[10 + l];",
@@ -127,6 +118,46 @@ def model_kernel_source() -> str:
         "        for (int m = 0; m < 5; ++m)",
         "          J[i][5 * v + m] = phi[p][v] * a[i][m] + b[i][m][0] * dphi[v][0]",
         "                            + b[i][m][1] * dphi[v][1];",
+    ]
+
+
+#: C statements: λ (K + M/A) of the vertices v, u of the triangle, into ``value``.
+_DAMPING_LINES = [
+    "      const double stiffness = area * (dphi[v][0] * dphi[u][0]",
+    "                                       + dphi[v][1] * dphi[u][1]);",
+    "      const double mass = area / 12.0 * (v == u ? 2.0 : 1.0);",
+    "      const double value = lambda * (stiffness + inverse_area * mass);",
+]
+
+
+@functools.cache
+def model_kernel_source() -> str:
+    """The C source of the element kernels (DOLFINx's ``tabulate_tensor`` signature):
+    ``ufl_frames_damped_gauss_newton`` and ``ufl_frames_damped_hessian``, the same in
+    reduced coordinates (``…_reduced2``, ``…_reduced3``) and their products with a field
+    (``…_action``).
+
+    Per triangle: ``w`` the 3 × 5 Odeco coefficients of q at its vertices (vertex-major),
+    ``c`` = (λ, 1/A), ``coordinate_dofs`` its 3 vertices (x, y, z). ``A`` (15 × 15,
+    row-major, zeroed by DOLFINx) receives Σ_points (area/3) J[φ_s]·J[φ_r] (+ r · D²r[φ_s,
+    φ_r] for the Hessian, r = [u, v] at the point) + λ (K_rs + M_rs/A) δ_components.
+    The reduced kernels read after q in ``w`` the 5 × c blocks T_v of a tangent basis
+    and write Tᵀ A T (3c × 3c); Gauss–Newton's from J T (2 × 3c a point) directly, about
+    a third of the flops of the 15 × 15 matrix and its product. The action kernels read
+    a field d after q and write A d (15 values).
+    """
+    a_lines, b_lines, second = _bracket_lines()
+    return "\n".join([
+        "#include <math.h>",
+        "#include <stdint.h>",
+        "static inline void model(double* restrict A, const double* restrict w,",
+        "                         const double* restrict c, const double* restrict x,",
+        "                         const int exact)",
+        "{",
+        *_geometry_lines(a_lines),
+        "  for (int p = 0; p < 3; ++p)",
+        "  {",
+        *_point_lines(b_lines),
         "    for (int r = 0; r < 15; ++r)",
         "    {",
         "      const double j0 = weight * J[0][r], j1 = weight * J[1][r];",
@@ -147,10 +178,7 @@ def model_kernel_source() -> str:
         "  for (int v = 0; v < 3; ++v)",
         "    for (int u = 0; u < 3; ++u)",
         "    {",
-        "      const double stiffness = area * (dphi[v][0] * dphi[u][0]",
-        "                                       + dphi[v][1] * dphi[u][1]);",
-        "      const double mass = area / 12.0 * (v == u ? 2.0 : 1.0);",
-        "      const double value = lambda * (stiffness + inverse_area * mass);",
+        *_DAMPING_LINES,
         "      for (int m = 0; m < 5; ++m)",
         "        A[15 * (5 * v + m) + 5 * u + m] += value;",
         "    }",
@@ -160,14 +188,57 @@ def model_kernel_source() -> str:
             "{",
             f"  model(A, w, c, coordinate_dofs, {int(exact)});",
             "}")],
-        "/* the element matrix in tangent coordinates: Tᵀ A T, T = diag(T_0, T_1, T_2) with",
-        "   T_v (5 × nc, row-major) the scaled tangent basis of vertex v, after q in w */",
-        "static inline void reduced(double* restrict R, const double* restrict w,",
-        "                           const double* restrict c, const double* restrict x,",
-        "                           const int exact, const int nc)",
+        "/* Gauss–Newton in tangent coordinates: Σ (J T)ᵀ (J T) + λ (K + M/A) T_vᵀ T_u, with",
+        "   T_v (5 × nc, row-major) the tangent basis of vertex v, after q in w */",
+        "static inline void reduced_gauss_newton(double* restrict R, const double* restrict w,",
+        "                                        const double* restrict c,",
+        "                                        const double* restrict x, const int nc)",
+        "{",
+        "  const double* restrict T = w + 15;",
+        "  const int m = 3 * nc;",
+        *_geometry_lines(a_lines),
+        "  for (int p = 0; p < 3; ++p)",
+        "  {",
+        *_point_lines(b_lines),
+        "    double JT[2][9];",
+        "    for (int i = 0; i < 2; ++i)",
+        "      for (int v = 0; v < 3; ++v)",
+        "        for (int k = 0; k < nc; ++k)",
+        "        {",
+        "          double s = 0.0;",
+        "          for (int n = 0; n < 5; ++n)",
+        "            s += J[i][5 * v + n] * T[5 * nc * v + nc * n + k];",
+        "          JT[i][nc * v + k] = s;",
+        "        }",
+        "    for (int r = 0; r < m; ++r)",
+        "    {",
+        "      const double j0 = weight * JT[0][r], j1 = weight * JT[1][r];",
+        "      for (int s = 0; s < m; ++s)",
+        "        R[m * r + s] += j0 * JT[0][s] + j1 * JT[1][s];",
+        "    }",
+        "  }",
+        "  const double lambda = c[0], inverse_area = c[1];",
+        "  for (int v = 0; v < 3; ++v)",
+        "    for (int u = 0; u < 3; ++u)",
+        "    {",
+        *_DAMPING_LINES,
+        "      for (int k = 0; k < nc; ++k)",
+        "        for (int l = 0; l < nc; ++l)",
+        "        {",
+        "          double s = 0.0;",
+        "          for (int n = 0; n < 5; ++n)",
+        "            s += T[5 * nc * v + nc * n + k] * T[5 * nc * u + nc * n + l];",
+        "          R[m * (nc * v + k) + nc * u + l] += value * s;",
+        "        }",
+        "    }",
+        "}",
+        "/* the full Hessian in tangent coordinates: Tᵀ A T from the 15 × 15 matrix */",
+        "static inline void reduced_hessian(double* restrict R, const double* restrict w,",
+        "                                   const double* restrict c,",
+        "                                   const double* restrict x, const int nc)",
         "{",
         "  double A[225] = {0};",
-        "  model(A, w, c, x, exact);",
+        "  model(A, w, c, x, 1);",
         "  const double* restrict T = w + 15;",
         "  const int m = 3 * nc;",
         "  double AT[15 * 9];  /* A T: 15 × 3 nc */",
@@ -204,7 +275,8 @@ def model_kernel_source() -> str:
         *[line for (exact, nc), name in _REDUCED_NAMES.items() for line in (
             f"void {name}{_ARGUMENTS}",
             "{",
-            f"  reduced(A, w, c, coordinate_dofs, {int(exact)}, {nc});",
+            f"  reduced_{'hessian' if exact else 'gauss_newton'}(A, w, c, coordinate_dofs, "
+            f"{nc});",
             "}")],
         *[line for exact, name in _ACTION_NAMES.items() for line in (
             f"void {name}{_ARGUMENTS}",
