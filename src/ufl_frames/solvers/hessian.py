@@ -623,26 +623,22 @@ class GaussNewtonModel:
         if not self.lean:
             self.gauss_newton.mult(v, y)
             return
-        problem, n = self.problem, self.problem.owned
+        problem = self.problem
         if self.direction is None:
             self.direction = fem.Function(problem.q.function_space)
+            self.product_vector = dolfinx.fem.petsc.create_vector(problem.q.function_space)
         if self.product_form is None or self.product_form[0] != self.exact:
             form = kernels.model_action_form(problem.q, self.direction, self.damping_weight,
                                              self.inverse_area, self.exact)
             self.product_form = (self.exact, form)
-            if self.product_vector is None:
-                self.product_vector = dolfinx.fem.petsc.create_vector(problem.q.function_space)
-        sqrt_mass = problem.sqrt_mass[:n, None]
-        d = self.direction.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
-        d[:n] = v.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS) / sqrt_mass
+        self.direction.x.petsc_vec.pointwiseMult(v, self.unscale)  # d = W⁻¹ v
         self.direction.x.scatter_forward()
         b = self.product_vector
         with b.localForm() as local:
             local.set(0.0)
         dolfinx.fem.petsc.assemble_vector(b, self.product_form[1])
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        y.getArray()[:] = (b.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS)
-                           / sqrt_mass).ravel()
+        y.pointwiseMult(b, self.unscale)  # y = W⁻¹ G_q W⁻¹ v
 
     def _free_basis(self) -> np.ndarray | None:
         """The tangent basis at the current q with the aspect bound's active set decided by
