@@ -59,7 +59,8 @@ def p1_interpolation(V_coarse, V_fine):
     """The P1 interpolation of one scalar from ``V_coarse``'s vertices to ``V_fine``'s (a
     SciPy CSR matrix, fine × coarse): barycentric weights in the coarse triangle holding
     each fine vertex; a fine vertex outside every coarse triangle (a curved boundary's
-    bulge) takes the value of the nearest coarse vertex."""
+    bulge, O(h²) out) is extrapolated linearly from the triangle at the nearest coarse
+    vertex that it is least outside of (exact for linear functions, as inside)."""
     import matplotlib.tri as mtri
     import numpy as np
     import scipy.sparse as sp
@@ -70,23 +71,31 @@ def p1_interpolation(V_coarse, V_fine):
     triangles = V_coarse.dofmap.list
     found = mtri.Triangulation(coarse[:, 0], coarse[:, 1], triangles).get_trifinder()(
         fine[:, 0], fine[:, 1])
-    inside = found >= 0
-    corners = triangles[found[inside]]  # (n, 3)
-    a, b, c = (coarse[corners[:, i]] for i in range(3))
-    p = fine[inside]
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
-    l1 = ((p[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (p[:, 1] - a[:, 1])) / det
-    l2 = ((b[:, 0] - a[:, 0]) * (p[:, 1] - a[:, 1]) - (p[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
-    weights = np.clip(np.stack([1 - l1 - l2, l1, l2], axis=1), 0.0, None)
-    weights /= weights.sum(axis=1, keepdims=True)
-    rows = np.repeat(np.flatnonzero(inside), 3)
+    outside = np.flatnonzero(found < 0)
+    if len(outside):  # the incident triangle of the nearest vertex with the largest min weight
+        nearest = cKDTree(coarse).query(fine[outside])[1]
+        for i, vertex in zip(outside, nearest):
+            incident = np.flatnonzero((triangles == vertex).any(axis=1))
+            weights = barycentric(coarse, triangles[incident], np.repeat(fine[i:i + 1], len(incident), 0))
+            found[i] = incident[np.argmax(weights.min(axis=1))]
+    corners = triangles[found]
+    weights = barycentric(coarse, corners, fine)
+    rows = np.repeat(np.arange(len(fine)), 3)
     cols, vals = corners.ravel(), weights.ravel()
-    outside = np.flatnonzero(~inside)
-    nearest = cKDTree(coarse).query(fine[outside])[1]
-    rows = np.concatenate([rows, outside])
-    cols = np.concatenate([cols, nearest])
-    vals = np.concatenate([vals, np.ones(len(outside))])
     return sp.csr_matrix((vals, (rows, cols)), shape=(len(fine), len(coarse)))
+
+
+def barycentric(points, corners, targets):
+    """Barycentric coordinates (n, 3) of ``targets`` (n, 2) in the triangles ``corners``
+    (n, 3 indices into ``points``); outside a triangle some are negative."""
+    import numpy as np
+
+    a, b, c = (points[corners[:, i]] for i in range(3))
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+    dx, dy = targets[:, 0] - a[:, 0], targets[:, 1] - a[:, 1]
+    l1 = (dx * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * dy) / det
+    l2 = ((b[:, 0] - a[:, 0]) * dy - dx * (b[:, 1] - a[:, 1])) / det
+    return np.stack([1 - l1 - l2, l1, l2], axis=1)
 
 
 def to_scipy(A):
