@@ -36,6 +36,11 @@ import argparse
 import os
 import time
 
+import matplotlib.tri as mtri
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
@@ -61,11 +66,6 @@ def p1_interpolation(V_coarse, V_fine):
     each fine vertex; a fine vertex outside every coarse triangle (a curved boundary's
     bulge, O(h²) out) is extrapolated linearly from the triangle at the nearest coarse
     vertex that it is least outside of (exact for linear functions, as inside)."""
-    import matplotlib.tri as mtri
-    import numpy as np
-    import scipy.sparse as sp
-    from scipy.spatial import cKDTree
-
     fine = V_fine.tabulate_dof_coordinates()[:, :2]
     coarse = V_coarse.tabulate_dof_coordinates()[:, :2]
     triangles = V_coarse.dofmap.list
@@ -74,9 +74,10 @@ def p1_interpolation(V_coarse, V_fine):
     outside = np.flatnonzero(found < 0)
     if len(outside):  # the incident triangle of the nearest vertex with the largest min weight
         nearest = cKDTree(coarse).query(fine[outside])[1]
-        for i, vertex in zip(outside, nearest):
+        for i, vertex in zip(outside, nearest, strict=True):
             incident = np.flatnonzero((triangles == vertex).any(axis=1))
-            weights = barycentric(coarse, triangles[incident], np.repeat(fine[i:i + 1], len(incident), 0))
+            weights = barycentric(coarse, triangles[incident],
+                                  np.repeat(fine[i:i + 1], len(incident), axis=0))
             found[i] = incident[np.argmax(weights.min(axis=1))]
     corners = triangles[found]
     weights = barycentric(coarse, corners, fine)
@@ -88,8 +89,6 @@ def p1_interpolation(V_coarse, V_fine):
 def barycentric(points, corners, targets):
     """Barycentric coordinates (n, 3) of ``targets`` (n, 2) in the triangles ``corners``
     (n, 3 indices into ``points``); outside a triangle some are negative."""
-    import numpy as np
-
     a, b, c = (points[corners[:, i]] for i in range(3))
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
     dx, dy = targets[:, 0] - a[:, 0], targets[:, 1] - a[:, 1]
@@ -99,8 +98,6 @@ def barycentric(points, corners, targets):
 
 
 def to_scipy(A):
-    import scipy.sparse as sp
-
     indptr, indices, values = A.getValuesCSR()
     return sp.csr_matrix((values, indices, indptr), shape=A.getSize())
 
@@ -181,15 +178,13 @@ def options(method: str, levels: int, unknowns: int) -> dict:
 def run(method, R, prolongations, levels, rhs, rtol, tag):
     """(iterations, setup s, solve s) of one method on R y = rhs."""
     prefix = f"npc_{tag}_"
-    database = PETSc.Options()
-    for key, value in options(method, levels, R.getSize()[0]).items():
+    database, settings = PETSc.Options(), options(method, levels, R.getSize()[0])
+    for key, value in settings.items():
         database[prefix + key] = value
     ksp = PETSc.KSP().create(MPI.COMM_SELF)
     try:
         ksp.setOptionsPrefix(prefix)
-        ksp.setOperators(R)
-        if method == "gamg":
-            R.setBlockSize(3)
+        ksp.setOperators(R)  # block size 3 (the reduced space's), which GAMG uses
         ksp.setTolerances(rtol=rtol, max_it=2000)
         ksp.setFromOptions()
         if method.startswith("mg-"):
@@ -207,7 +202,7 @@ def run(method, R, prolongations, levels, rhs, rtol, tag):
         return (1 if method == "direct" else its), setup, solve
     finally:
         ksp.destroy()
-        for key in options(method, levels, R.getSize()[0]):
+        for key in settings:
             database.delValue(prefix + key)
 
 
@@ -259,8 +254,6 @@ if __name__ == "__main__":
 
     init_petsc()
     import dolfinx.fem.petsc
-    import numpy as np
-    import scipy.sparse as sp
     from mpi4py import MPI
     from petsc4py import PETSc
 
