@@ -1,0 +1,193 @@
+"""Where the non-isotropic piano's Newton steps go: a field pressed against the aspect bound.
+
+    python benchmarks/aspect_drift.py [--sizes 0.0347 0.01737 0.008687] [--aspects 2 4 8]
+                                      [--figure docs/figures/aspect_drift.png] [PETSc options]
+
+The non-isotropic piano is the one case whose finest level takes 30-55 Newton steps at every
+size (the annulus and the isotropic cases 4-11). This script asks what those steps do. For
+each mesh size of ``--sizes`` (the finest level; the coarser ones as the CLI makes them:
+Gmsh meshes of 2^k times the size, :func:`ufl_frames.cli.auto_levels` of them) and each
+bound l_max/l_min ≤ A of ``--aspects``, it runs the CLI's nested iteration with the default
+solver, and on the finest level records per Newton step H, the Dirichlet energy E and the
+share of vertices whose frames are on the bound (aspect within 1e-6 of A).
+
+Printed per run: triangles, every level's Newton steps, the finest level's H at its start
+and end, the Newton steps it took to come within 10 % and within 1 % of its final H (what
+is left after that is the tail), E at its start, at the 10 % step and at the end, the shares
+of frames on the bound and within 10 % of it (l_max/l_min ≥ 0.9 A) at those steps, and the
+finest level's seconds. ``--figure``: for A = 4 at the largest size, the aspect
+l_max/l_min at the 10 % step and at the end, the change of q between them (where the tail
+moves the field), and for every A the finest level's H / H_final − 1 against the step.
+What it showed on 2026-12-05 is in benchmarks/README.md
+("The non-isotropic piano's field is pressed against the aspect bound").
+"""
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+#: A frame counts as on the bound where l_max/l_min ≥ (1 − this) A …
+ON_BOUND_RTOL = 1e-6
+#: … and as near it where l_max/l_min ≥ this A.
+NEAR_BOUND = 0.9
+
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    parser.add_argument("--sizes", type=float, nargs="+", default=[0.0347, 0.01737, 0.008687],
+                        help="finest mesh sizes (default: about 4 000, 15 600 and 61 600 "
+                             "triangles, the three coarsest levels of the 10⁶ hierarchy)")
+    parser.add_argument("--aspects", type=float, nargs="+", default=[2.0, 4.0, 8.0],
+                        help="bounds A on l_max/l_min (the CLI's default is 4)")
+    parser.add_argument("--max-it", type=int, default=500, help="Newton steps a level at most")
+    parser.add_argument("--figure", default=None, help="PNG of the largest size's runs")
+    return parser.parse_known_args(argv)
+
+
+def aspect(rows: np.ndarray) -> np.ndarray:
+    """l_max / l_min of each frame (rows (N, 5) on the variety)."""
+    lengths, _ = odeco.q_to_frames(rows)
+    return lengths.max(axis=1) / np.maximum(lengths.min(axis=1), 1e-300)
+
+
+def first_within(energies: list[float], rtol: float) -> int:
+    """The first step whose H is within ``rtol`` of the last one."""
+    final = energies[-1]
+    return next(k for k, value in enumerate(energies) if value <= (1 + rtol) * final)
+
+
+def run(h: float, max_aspect: float, max_it: int) -> dict:
+    """Nested iteration on the piano at finest size ``h`` with the bound ``max_aspect``, as
+    :meth:`FrameField.nested` does it, the finest level traced step by step."""
+    comm = MPI.COMM_WORLD
+    fine_domain = geometry.build(comm, "piano", h)
+    count = auto_levels(fine_domain.num_cells)
+    domains = [geometry.build(comm, "piano", h, 2.0**k) for k in range(count - 1, 0, -1)]
+    domains.append(fine_domain)
+    coarse_energy, reference, coarse_steps = None, None, []
+    if len(domains) > 1:
+        coarse = FrameField.nested(domains[:-1], max_aspect=max_aspect, max_it=max_it)
+        coarse_energy = coarse.levels[-1]["H"]
+        reference = coarse.level_histories[0][0]["gnorm"]
+        coarse_steps = [level["iterations"] for level in coarse.levels]
+        field = coarse.transferred(fine_domain)
+    else:
+        field = FrameField.initial(fine_domain, max_aspect=max_aspect)
+    trace = {"H": [], "E": [], "bound": [], "near": [], "rows": []}
+
+    def monitor(entry):
+        rows = field.problem.rows[: field.problem.owned]
+        trace["H"].append(entry["H"])
+        trace["E"].append(entry["E"])
+        ratio = aspect(rows)
+        trace["bound"].append(float(np.mean(ratio >= (1 - ON_BOUND_RTOL) * max_aspect)))
+        trace["near"].append(float(np.mean(ratio >= NEAR_BOUND * max_aspect)))
+        trace["rows"].append(rows.copy())
+
+    start = time.perf_counter()
+    result = field.solve(max_it=max_it, monitor=monitor, reference_gradient=reference,
+                         coarse_energy=coarse_energy)
+    seconds = time.perf_counter() - start
+    ten, one = first_within(trace["H"], 0.1), first_within(trace["H"], 0.01)
+    V = field.q.function_space
+    return {"h": h, "A": max_aspect, "triangles": fine_domain.num_cells,
+            "steps": [*coarse_steps, result.iterations], "reason": result.converged_reason,
+            "seconds": seconds, "ten": ten, "one": one, "trace": trace,
+            "x": V.tabulate_dof_coordinates()[: field.problem.owned, :2],
+            "cells": V.dofmap.list}
+
+
+def report(record: dict) -> str:
+    trace, ten, one = record["trace"], record["ten"], record["one"]
+    H, E, bound, near = trace["H"], trace["E"], trace["bound"], trace["near"]
+    steps = " / ".join(str(s) for s in record["steps"])
+    return (f"| {record['triangles']} | {record['A']:g} | {steps} | {H[0]:.3e} → {H[-1]:.4e} "
+            f"| {ten} / {one} | {E[0]:.2f} / {E[ten]:.2f} / {E[-1]:.2f} "
+            f"| {bound[0]:.0%} / {bound[ten]:.0%} / {bound[-1]:.0%} "
+            f"| {near[0]:.0%} / {near[ten]:.0%} / {near[-1]:.0%} | {record['seconds']:.1f} |")
+
+
+def figure(records: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.tri as mtri
+
+    largest = max(r["triangles"] for r in records)
+    runs = [r for r in records if r["triangles"] == largest]
+    main = min(runs, key=lambda r: abs(r["A"] - 4.0))
+    rows = main["trace"]["rows"]
+    tri = mtri.Triangulation(main["x"][:, 0], main["x"][:, 1], main["cells"])
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8), layout="constrained")
+    for ax, step, label in ((axes[0, 0], main["ten"], "within 10 % of the final H"),
+                            (axes[0, 1], len(rows) - 1, "the end")):
+        shade = ax.tripcolor(tri, aspect(rows[step]), shading="gouraud", vmin=1,
+                             vmax=main["A"], cmap="viridis")
+        ax.set_title(f"l_max / l_min at step {step} ({label})")
+        fig.colorbar(shade, ax=ax)
+    change = np.linalg.norm(rows[-1] - rows[main["ten"]], axis=1)
+    shade = axes[1, 0].tripcolor(tri, change / np.linalg.norm(rows[-1], axis=1).mean(),
+                                 shading="gouraud", cmap="magma")
+    axes[1, 0].set_title(f"|q(end) − q(step {main['ten']})| / mean |q|: what the tail moves")
+    fig.colorbar(shade, ax=axes[1, 0])
+    for ax in axes[0, 0], axes[0, 1], axes[1, 0]:
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for r in sorted(runs, key=lambda r: r["A"]):
+        H = np.array(r["trace"]["H"])
+        axes[1, 1].semilogy(H[:-1] / H[-1] - 1, label=f"A = {r['A']:g}: H {H[-1]:.2e}, "
+                                                       f"{len(H) - 1} steps")
+    axes[1, 1].axhline(0.1, color="grey", lw=0.8, ls="--")
+    axes[1, 1].axhline(0.01, color="grey", lw=0.8, ls=":")
+    axes[1, 1].set_xlabel("Newton step on the finest level")
+    axes[1, 1].set_ylabel("H / H_final − 1")
+    axes[1, 1].set_title(f"the finest level's H, {largest} triangles")
+    axes[1, 1].legend()
+    fig.suptitle(f"Non-isotropic piano, A = {main['A']:g}: frames near the aspect bound on "
+                 "half the domain, and the tail moving the wall between two such regions")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    args, petsc_args = parse_args(argv)
+    import sys
+
+    sys.argv = [sys.argv[0], *petsc_args]
+    if MPI.COMM_WORLD.size > 1:
+        raise SystemExit("aspect_drift.py runs in one process")
+    records = []
+    for h in args.sizes:
+        for max_aspect in args.aspects:
+            records.append(run(h, max_aspect, args.max_it))
+            print(report(records[-1]), flush=True)
+    print("\n| triangles | A | Newton steps per level | finest H: start → end "
+          "| steps to 10 % / 1 % of the final H | E: start / 10 % step / end "
+          "| on the bound: start / 10 % step / end | within 10 % of it | finest s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for record in records:
+        print(report(record))
+    if args.figure:
+        figure(records, args.figure)
+        print(f"wrote {args.figure}")
+
+
+if __name__ == "__main__":
+    from ufl_frames.bootstrap import init_petsc
+
+    init_petsc()
+    from mpi4py import MPI
+
+    from ufl_frames import geometry
+    from ufl_frames.cli import auto_levels
+    from ufl_frames.frames2d import odeco
+    from ufl_frames.pipeline import FrameField
+
+    main()
