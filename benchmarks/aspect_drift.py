@@ -18,6 +18,8 @@ of frames on the bound and within 10 % of it (l_max/l_min ≥ 0.9 A) at those st
 finest level's seconds. ``--figure``: for A = 4 at the largest size, the aspect
 l_max/l_min at the 10 % step and at the end, the change of q between them (where the tail
 moves the field), and for every A the finest level's H / H_final − 1 against the step.
+``--probe``: H along every third Newton step of the tail (from the 10 % step on), at 1,
+1.5, 2, 3 and 4 times the step — whether longer steps would have gone further.
 What it showed on 2026-12-05 is in benchmarks/README.md
 ("The non-isotropic piano's field is pressed against the aspect bound").
 """
@@ -35,6 +37,8 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 ON_BOUND_RTOL = 1e-6
 #: … and as near it where l_max/l_min ≥ this A.
 NEAR_BOUND = 0.9
+#: Multiples of a Newton step at which ``--probe`` evaluates H (the retracted point).
+PROBE_LENGTHS = (1.0, 1.5, 2.0, 3.0, 4.0)
 
 
 def parse_args(argv=None):
@@ -46,6 +50,9 @@ def parse_args(argv=None):
                         help="bounds A on l_max/l_min (the CLI's default is 4)")
     parser.add_argument("--max-it", type=int, default=500, help="Newton steps a level at most")
     parser.add_argument("--figure", default=None, help="PNG of the largest size's runs")
+    parser.add_argument("--probe", action="store_true",
+                        help="also H along every third Newton step of the tail, at "
+                             f"{', '.join(f'{t:g}' for t in PROBE_LENGTHS)} times its length")
     return parser.parse_known_args(argv)
 
 
@@ -61,7 +68,30 @@ def first_within(energies: list[float], rtol: float) -> int:
     return next(k for k, value in enumerate(energies) if value <= (1 + rtol) * final)
 
 
-def run(h: float, max_aspect: float, max_it: int) -> dict:
+def probe(field, trace: dict, first: int) -> list[str]:
+    """H along every third Newton step from step ``first`` on: the step from the iterate k
+    to k + 1 taken :data:`PROBE_LENGTHS` times, retracted (the solver's own path at 1)."""
+    problem = field.problem
+    manifold = problem.manifold
+    vector = dolfinx.fem.petsc.create_vector(field.q.function_space)
+    lines = []
+    try:
+        for k in range(first, len(trace["rows"]) - 1, 3):
+            x0, x1 = (manifold.to_x(trace["rows"][j]) for j in (k, k + 1))
+            changes = []
+            for t in PROBE_LENGTHS:
+                vector.getArray()[:] = (x0 + t * (x1 - x0)).ravel()
+                problem.set_from_x(vector)
+                changes.append(f"{problem.energy() / trace['H'][k] - 1:+.2%}")
+            lines.append(f"  step {k}: H {trace['H'][k]:.4e}; H / H_k − 1 at "
+                         + ", ".join(f"{t:g}×: {c}" for t, c in zip(PROBE_LENGTHS, changes,
+                                                                    strict=True)))
+    finally:
+        vector.destroy()
+    return lines
+
+
+def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False) -> dict:
     """Nested iteration on the piano at finest size ``h`` with the bound ``max_aspect``, as
     :meth:`FrameField.nested` does it, the finest level traced step by step."""
     comm = MPI.COMM_WORLD
@@ -95,7 +125,8 @@ def run(h: float, max_aspect: float, max_it: int) -> dict:
     seconds = time.perf_counter() - start
     ten, one = first_within(trace["H"], 0.1), first_within(trace["H"], 0.01)
     V = field.q.function_space
-    return {"h": h, "A": max_aspect, "triangles": fine_domain.num_cells,
+    probes = probe(field, trace, ten) if with_probe else []
+    return {"probes": probes, "h": h, "A": max_aspect, "triangles": fine_domain.num_cells,
             "steps": [*coarse_steps, result.iterations], "reason": result.converged_reason,
             "seconds": seconds, "ten": ten, "one": one, "trace": trace,
             "x": V.tabulate_dof_coordinates()[: field.problem.owned, :2],
@@ -166,8 +197,10 @@ def main(argv=None):
     records = []
     for h in args.sizes:
         for max_aspect in args.aspects:
-            records.append(run(h, max_aspect, args.max_it))
+            records.append(run(h, max_aspect, args.max_it, args.probe))
             print(report(records[-1]), flush=True)
+            for line in records[-1]["probes"]:
+                print(line, flush=True)
     print("\n| triangles | A | Newton steps per level | finest H: start → end "
           "| steps to 10 % / 1 % of the final H | E: start / 10 % step / end "
           "| on the bound: start / 10 % step / end | within 10 % of it | finest s |")
@@ -183,6 +216,7 @@ if __name__ == "__main__":
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc()
+    import dolfinx.fem.petsc
     from mpi4py import MPI
 
     from ufl_frames import geometry
