@@ -19,7 +19,8 @@ finest level's seconds. ``--figure``: for A = 4 at the largest size, the aspect
 l_max/l_min at the 10 % step and at the end, the change of q between them (where the tail
 moves the field), and for every A the finest level's H / H_final − 1 against the step.
 ``--probe``: H along every third Newton step of the tail (from the 10 % step on), at 1,
-1.5, 2, 3 and 4 times the step — whether longer steps would have gone further.
+1.5, 2, 3 and 4 times the step, retracted as the solver does and with no aspect bound —
+whether longer steps would have gone further, and whether the bound's clamp stops them.
 What it showed on 2026-12-05 is in benchmarks/README.md
 ("The non-isotropic piano's field is pressed against the aspect bound").
 """
@@ -70,22 +71,34 @@ def first_within(energies: list[float], rtol: float) -> int:
 
 def probe(field, trace: dict, first: int) -> list[str]:
     """H along every third Newton step from step ``first`` on: the step from the iterate k
-    to k + 1 taken :data:`PROBE_LENGTHS` times, retracted (the solver's own path at 1)."""
+    to k + 1 taken :data:`PROBE_LENGTHS` times and retracted as the solver does (the
+    solver's own path at 1), and retracted with no aspect bound (whether the bound's
+    clamp is what bends the path)."""
     problem = field.problem
     manifold = problem.manifold
+    unbounded = FrameManifold(manifold.constraints.for_frames(False, None),
+                              radius2=manifold.radius2)
     vector = dolfinx.fem.petsc.create_vector(field.q.function_space)
+
+    def bounded_energy(rows):
+        vector.getArray()[:] = manifold.to_x(rows).ravel()
+        problem.set_from_x(vector)
+        return problem.energy()
+
+    def unbounded_energy(rows):
+        problem.q.x.array[:] = unbounded.retract(rows).ravel()
+        return problem.energy()
+
     lines = []
     try:
         for k in range(first, len(trace["rows"]) - 1, 3):
-            x0, x1 = (manifold.to_x(trace["rows"][j]) for j in (k, k + 1))
-            changes = []
-            for t in PROBE_LENGTHS:
-                vector.getArray()[:] = (x0 + t * (x1 - x0)).ravel()
-                problem.set_from_x(vector)
-                changes.append(f"{problem.energy() / trace['H'][k] - 1:+.2%}")
-            lines.append(f"  step {k}: H {trace['H'][k]:.4e}; H / H_k − 1 at "
-                         + ", ".join(f"{t:g}×: {c}" for t, c in zip(PROBE_LENGTHS, changes,
-                                                                    strict=True)))
+            start, end = trace["rows"][k], trace["rows"][k + 1]
+            for label, energy in (("bound", bounded_energy), ("no bound", unbounded_energy)):
+                changes = [energy(start + t * (end - start)) / trace["H"][k] - 1
+                           for t in PROBE_LENGTHS]
+                lines.append(f"  step {k} ({label}): H {trace['H'][k]:.4e}; H / H_k − 1 at "
+                             + ", ".join(f"{t:g}×: {c:+.2%}" for t, c in zip(
+                                 PROBE_LENGTHS, changes, strict=True)))
     finally:
         vector.destroy()
     return lines
@@ -221,6 +234,7 @@ if __name__ == "__main__":
 
     from ufl_frames import geometry
     from ufl_frames.cli import auto_levels
+    from ufl_frames.fem.manifold import FrameManifold
     from ufl_frames.frames2d import odeco
     from ufl_frames.pipeline import FrameField
 
