@@ -21,6 +21,8 @@ moves the field), and for every A the finest level's H / H_final − 1 against t
 ``--probe``: H along every third Newton step of the tail (from the 10 % step on), at 1,
 1.5, 2, 3 and 4 times the step, retracted as the solver does and with no aspect bound —
 whether longer steps would have gone further, and whether the bound's clamp stops them.
+``--quads``: the quad mesh of the field at the 10 % step and at the end (what the tail
+is worth to a quad mesh).
 What it showed on 2026-12-05 is in benchmarks/README.md
 ("The non-isotropic piano's field is pressed against the aspect bound").
 """
@@ -51,6 +53,9 @@ def parse_args(argv=None):
                         help="bounds A on l_max/l_min (the CLI's default is 4)")
     parser.add_argument("--max-it", type=int, default=500, help="Newton steps a level at most")
     parser.add_argument("--figure", default=None, help="PNG of the largest size's runs")
+    parser.add_argument("--quads", action="store_true",
+                        help="also the quad mesh (default quad size) of the field at the "
+                             "10 %% step and at the end")
     parser.add_argument("--probe", action="store_true",
                         help="also H along every third Newton step of the tail, at "
                              f"{', '.join(f'{t:g}' for t in PROBE_LENGTHS)} times its length")
@@ -104,7 +109,17 @@ def probe(field, trace: dict, first: int) -> list[str]:
     return lines
 
 
-def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False) -> dict:
+def quads_at(field, rows: np.ndarray) -> str:
+    """The quad mesh measures of ``field`` with its frames set to ``rows`` (serial)."""
+    field.q.x.array[:] = rows.ravel()
+    quality = field.quadrangulate()
+    return (f"{quality['quads']} quads, {quality['irregular_vertices']} irregular vertices, "
+            f"scaled Jacobian min {quality['min_sj']:.3f}, edge ratio max "
+            f"{quality['edge_length_ratio']['max']:.2f}, misfit {quality['misfit_quantised']:.4f}")
+
+
+def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False,
+        with_quads: bool = False) -> dict:
     """Nested iteration on the piano at finest size ``h`` with the bound ``max_aspect``, as
     :meth:`FrameField.nested` does it, the finest level traced step by step."""
     comm = MPI.COMM_WORLD
@@ -139,6 +154,9 @@ def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False) -> d
     ten, one = first_within(trace["H"], 0.1), first_within(trace["H"], 0.01)
     V = field.q.function_space
     probes = probe(field, trace, ten) if with_probe else []
+    if with_quads:
+        probes += [f"  quads at step {ten} (10 %): {quads_at(field, trace['rows'][ten])}",
+                   f"  quads at the end: {quads_at(field, trace['rows'][-1])}"]
     return {"probes": probes, "h": h, "A": max_aspect, "triangles": fine_domain.num_cells,
             "steps": [*coarse_steps, result.iterations], "reason": result.converged_reason,
             "seconds": seconds, "ten": ten, "one": one, "trace": trace,
@@ -210,7 +228,7 @@ def main(argv=None):
     records = []
     for h in args.sizes:
         for max_aspect in args.aspects:
-            records.append(run(h, max_aspect, args.max_it, args.probe))
+            records.append(run(h, max_aspect, args.max_it, args.probe, args.quads))
             print(report(records[-1]), flush=True)
             for line in records[-1]["probes"]:
                 print(line, flush=True)
