@@ -3,8 +3,8 @@
     python benchmarks/aspect_drift.py [--sizes 0.0347 0.01737 0.008687] [--aspects 2 4 8]
                                       [--figure docs/figures/aspect_drift.png] [PETSc options]
 
-The non-isotropic piano is the one case whose finest level takes 30-55 Newton steps at every
-size (the annulus and the isotropic cases 4-11). This script asks what those steps do. For
+The non-isotropic piano is the one case whose finest level often takes 30-55 Newton steps
+(the annulus and the isotropic cases 4-11 at every size). This script asks what those steps do. For
 each mesh size of ``--sizes`` (the finest level; the coarser ones as the CLI makes them:
 Gmsh meshes of 2^k times the size, :func:`ufl_frames.cli.auto_levels` of them) and each
 bound l_max/l_min ≤ A of ``--aspects``, it runs the CLI's nested iteration with the default
