@@ -1,15 +1,17 @@
 """Where the non-isotropic piano's Newton steps go: a field pressed against the aspect bound.
 
     python benchmarks/aspect_drift.py [--sizes 0.0347 0.01737 0.008687] [--aspects 2 4 8]
-                                      [--figure docs/figures/aspect_drift.png] [PETSc options]
+                                      [--figure docs/figures/aspect_drift.png]
+                                      [--probe] [--quads] [PETSc options]
 
 The non-isotropic piano is the one case whose finest level often takes 30-55 Newton steps
-(the annulus and the isotropic cases 4-11 at every size). This script asks what those steps do. For
-each mesh size of ``--sizes`` (the finest level; the coarser ones as the CLI makes them:
-Gmsh meshes of 2^k times the size, :func:`ufl_frames.cli.auto_levels` of them) and each
-bound l_max/l_min ≤ A of ``--aspects``, it runs the CLI's nested iteration with the default
-solver, and on the finest level records per Newton step H, the Dirichlet energy E and the
-share of vertices whose frames are on the bound (aspect within 1e-6 of A).
+(the annulus and the isotropic cases 4-11 at every size). This script asks what those
+steps do. For each mesh size of ``--sizes`` (the finest level; the coarser ones as the CLI
+makes them: Gmsh meshes of 2^k times the size, :func:`ufl_frames.cli.auto_levels` of them)
+and each bound l_max/l_min ≤ A of ``--aspects``, it runs the CLI's nested iteration
+(:meth:`FrameField.nested`, default solver) and, through its checkpoint hook, records per
+Newton step of the finest level H, the Dirichlet energy E and the share of vertices
+whose frames are on the bound (aspect within 1e-6 of A).
 
 Printed per run: triangles, every level's Newton steps, the finest level's H at its start
 and end, the Newton steps it took to come within 10 % and within 1 % of its final H (what
@@ -29,7 +31,6 @@ What it showed on 2026-12-05 is in benchmarks/README.md
 
 import argparse
 import os
-import time
 
 import numpy as np
 
@@ -120,37 +121,26 @@ def quads_at(field, rows: np.ndarray) -> str:
 
 def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False,
         with_quads: bool = False) -> dict:
-    """Nested iteration on the piano at finest size ``h`` with the bound ``max_aspect``, as
-    :meth:`FrameField.nested` does it, the finest level traced step by step."""
+    """Nested iteration (:meth:`FrameField.nested`) on the piano at finest size ``h`` with
+    the bound ``max_aspect``; its checkpoint hook traces the finest level step by step."""
     comm = MPI.COMM_WORLD
     fine_domain = geometry.build(comm, "piano", h)
     count = auto_levels(fine_domain.num_cells)
     domains = [geometry.build(comm, "piano", h, 2.0**k) for k in range(count - 1, 0, -1)]
     domains.append(fine_domain)
-    coarse_energy, reference, coarse_steps = None, None, []
-    if len(domains) > 1:
-        coarse = FrameField.nested(domains[:-1], max_aspect=max_aspect, max_it=max_it)
-        coarse_energy = coarse.levels[-1]["H"]
-        reference = coarse.level_histories[0][0]["gnorm"]
-        coarse_steps = [level["iterations"] for level in coarse.levels]
-        field = coarse.transferred(fine_domain)
-    else:
-        field = FrameField.initial(fine_domain, max_aspect=max_aspect)
     trace = {"H": [], "E": [], "bound": [], "near": [], "rows": []}
 
-    def monitor(entry):
-        rows = field.problem.rows[: field.problem.owned]
-        trace["H"].append(entry["H"])
-        trace["E"].append(entry["E"])
-        ratio = aspect(rows)
+    def keep(state, finest):
+        if not finest:
+            return
+        ratio = aspect(state.rows)
+        trace["H"].append(state.history[-1]["H"])
+        trace["E"].append(state.history[-1]["E"])
         trace["bound"].append(float(np.mean(ratio >= (1 - ON_BOUND_RTOL) * max_aspect)))
         trace["near"].append(float(np.mean(ratio >= NEAR_BOUND * max_aspect)))
-        trace["rows"].append(rows.copy())
+        trace["rows"].append(state.rows)
 
-    start = time.perf_counter()
-    result = field.solve(max_it=max_it, monitor=monitor, reference_gradient=reference,
-                         coarse_energy=coarse_energy)
-    seconds = time.perf_counter() - start
+    field = FrameField.nested(domains, max_aspect=max_aspect, max_it=max_it, checkpoint=keep)
     ten, one = first_within(trace["H"], 0.1), first_within(trace["H"], 0.01)
     V = field.q.function_space
     probes = probe(field, trace, ten) if with_probe else []
@@ -158,8 +148,8 @@ def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False,
         probes += [f"  quads at step {ten} (10 %): {quads_at(field, trace['rows'][ten])}",
                    f"  quads at the end: {quads_at(field, trace['rows'][-1])}"]
     return {"probes": probes, "h": h, "A": max_aspect, "triangles": fine_domain.num_cells,
-            "steps": [*coarse_steps, result.iterations], "reason": result.converged_reason,
-            "seconds": seconds, "ten": ten, "one": one, "trace": trace,
+            "steps": [level["iterations"] for level in field.levels],
+            "seconds": field.levels[-1]["seconds"], "ten": ten, "one": one, "trace": trace,
             "x": V.tabulate_dof_coordinates()[: field.problem.owned, :2],
             "cells": V.dofmap.list}
 
