@@ -124,9 +124,9 @@ def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False,
     """Nested iteration (:meth:`FrameField.nested`) on the piano at finest size ``h`` with
     the bound ``max_aspect``; its checkpoint hook traces the finest level step by step."""
     comm = MPI.COMM_WORLD
-    fine_domain = geometry.build(comm, "piano", h)
+    fine_domain = build(comm, "piano", h)
     count = auto_levels(fine_domain.num_cells)
-    domains = [geometry.build(comm, "piano", h, 2.0**k) for k in range(count - 1, 0, -1)]
+    domains = [build(comm, "piano", h, 2.0**k) for k in range(count - 1, 0, -1)]
     domains.append(fine_domain)
     trace = {"H": [], "E": [], "bound": [], "near": [], "rows": []}
 
@@ -240,10 +240,10 @@ if __name__ == "__main__":
     import dolfinx.fem.petsc
     from mpi4py import MPI
 
-    from ufl_frames import geometry
     from ufl_frames.cli import auto_levels
     from ufl_frames.fem.manifold import FrameManifold
     from ufl_frames.frames2d import odeco
+    from ufl_frames.mesh import build
     from ufl_frames.pipeline import FrameField
 
     main()

@@ -127,9 +127,10 @@ init_petsc(sys.argv[:1] + PETSC_ARGV)
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, solvers  # noqa: E402
+from ufl_frames import solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.frames2d import singularities  # noqa: E402
+from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 
@@ -251,7 +252,7 @@ class MeshState:
 
     def __init__(self, comm, geometry_name, h):
         start = time.perf_counter()
-        mesh = geometry.build(comm, geometry_name, h).mesh
+        mesh = build(comm, geometry_name, h).mesh
         self.q = mbo.mbo_frame_field(energy.frame_space(mesh))
         self.q0 = self.q.x.array.copy()
         self.cells = mesh.topology.index_map(2).size_global

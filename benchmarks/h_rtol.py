@@ -40,8 +40,8 @@ init_petsc([sys.argv[0]])
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from ufl_frames import geometry  # noqa: E402
 from ufl_frames.cli import auto_levels  # noqa: E402
+from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 from ufl_frames.solvers import tao  # noqa: E402
 
@@ -60,12 +60,12 @@ def solve_histories(case: str) -> list[list[dict]]:
     try:
         if kind.startswith("nested-"):
             shape = kind[len("nested-"):]
-            fine = geometry.build(comm, shape, h)
+            fine = build(comm, shape, h)
             count = auto_levels(fine.num_cells)
-            domains = [geometry.build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)]
+            domains = [build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)]
             field = FrameField.nested(domains + [fine], max_it=500)
             return field.level_histories
-        field = FrameField.initial(geometry.build(comm, kind, h))
+        field = FrameField.initial(build(comm, kind, h))
         return [field.solve(max_it=500).history]
     finally:
         opts.delValue("frames_h_rtol")

@@ -25,9 +25,10 @@ init_petsc([sys.argv[0], *petsc_args])
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, solvers  # noqa: E402
+from ufl_frames import solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.frames2d import singularities  # noqa: E402
+from ufl_frames.mesh import piano  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 
@@ -39,7 +40,7 @@ comm = MPI.COMM_WORLD
 say = print if comm.rank == 0 else (lambda *a, **k: None)
 say(f"{'h':>6} {'pinned':>7} {'its':>5} {'H':>10} {'rel |g|':>9} {'reason':<22} singularities")
 for h in args.sizes:
-    mesh = geometry.piano(comm, mesh_size=h).mesh
+    mesh = piano(comm, mesh_size=h).mesh
     V = energy.frame_space(mesh)
     initial = mbo.mbo_frame_field(V)
     for pinned in (True, False):

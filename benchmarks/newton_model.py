@@ -83,7 +83,7 @@ def main(argv=None):
     comm = MPI.COMM_WORLD
     rows = []
     for h in args.sizes:
-        domain = geometry.build(comm, "piano", mesh_size=h)
+        domain = build(comm, "piano", mesh_size=h)
         field = FrameField.initial(domain)
         problem = solvers.frame_problem(field.q, constraints=field.constraints)
         template = dolfinx.fem.petsc.create_vector(problem.q.function_space)
@@ -122,7 +122,8 @@ if __name__ == "__main__":
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    from ufl_frames import geometry, solvers
+    from ufl_frames import solvers
+    from ufl_frames.mesh import build
     from ufl_frames.pipeline import FrameField
     from ufl_frames.solvers.hessian import GaussNewtonModel
 

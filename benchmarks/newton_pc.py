@@ -5,7 +5,7 @@
 The default solver factorises R = Tᵀ W⁻¹ (JᵀJ + λ (K + M/A)) W⁻¹ T (3 unknowns a vertex)
 once per Newton step with MUMPS, whose cost grows like N^1.5. This script asks which
 iterative preconditioner could replace it. For each ``L`` of ``--levels`` it builds the
-nested piano meshes (``geometry.build_nested``: Gmsh meshes the coarsest at
+nested piano meshes (``ufl_frames.mesh.build_nested``: Gmsh meshes the coarsest at
 ``--coarse-size``, every finer level splits each triangle into 4), solves the
 non-isotropic field there by nested iteration (at most ``--max-it`` Newton steps a
 level: the matrix of a field near a minimum is what the late steps factorise), builds
@@ -215,8 +215,8 @@ def main(argv=None):
         raise SystemExit("newton_pc.py runs in one process (its interpolation is serial)")
     rows = []
     for levels in args.levels:
-        domains = geometry.build_nested(MPI.COMM_SELF, "piano", levels=levels,
-                                        mesh_size=args.coarse_size / 2 ** (levels - 1))
+        domains = build_nested(MPI.COMM_SELF, "piano", levels=levels,
+                               mesh_size=args.coarse_size / 2 ** (levels - 1))
         finest = FrameField.nested(domains, max_it=args.max_it)
         hierarchy = Hierarchy(domains, finest)
         try:
@@ -257,7 +257,8 @@ if __name__ == "__main__":
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    from ufl_frames import geometry, solvers
+    from ufl_frames import solvers
+    from ufl_frames.mesh import build_nested
     from ufl_frames.pipeline import FrameField
     from ufl_frames.solvers.hessian import GaussNewtonModel
 

@@ -24,7 +24,7 @@ init_petsc(sys.argv[:1])
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry  # noqa: E402
+from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 
 CASES = ("piano-noniso", "piano-iso", "annulus-noniso", "annulus-iso")
@@ -40,7 +40,7 @@ def measure(case: str, h: float, gd_iterations: int | None) -> list[dict]:
     if gd_iterations:
         variants.append(("bncg", "bncg", gd_iterations))
     for name, tao_type, max_it in variants:
-        field = FrameField.initial(geometry.build(comm, shape, h), isotropic=kind == "iso")
+        field = FrameField.initial(build(comm, shape, h), isotropic=kind == "iso")
         H, reason = float("nan"), "-"
         if tao_type == "conformal":  # one Poisson solve for the lengths, no TAO
             field.conformal()

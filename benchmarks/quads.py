@@ -31,7 +31,7 @@ ufl_frames gets ``--quad-size`` S = √(area / target). Gmsh meshes with
 ``Mesh.MeshSizeMax`` = h from a first guess per method, then h is rescaled by
 √(quads / target) (the count goes as 1/h²) at most twice, until within 10 %. The Gmsh
 runs use the project's loader settings for curves (at least 12 points per full circle, 8
-per other curve; ``ufl_frames.geometry``). Every Gmsh run is a subprocess of this script
+per other curve; ``ufl_frames.mesh``). Every Gmsh run is a subprocess of this script
 (``--gmsh-timeout``, default 300 s: algorithm 11 can hang); the time reported is that of
 ``gmsh.model.mesh.generate(2)`` at the final size.
 
@@ -83,7 +83,7 @@ UFL_FRAMES_METHODS = {"ufl_frames": [], "ufl_frames_iso": ["--isotropic"],
 DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames", "ufl_frames_iso",
                    "ufl_frames_conf")
 ALL_METHODS = (*GMSH_METHODS, *UFL_FRAMES_METHODS)
-#: Loader settings for curves (ufl_frames.geometry.CURVE_POINTS_PER_TURN / _PER_CURVE).
+#: Loader settings for curves (ufl_frames.mesh.meshing.CURVE_POINTS_PER_TURN / _PER_CURVE).
 CURVE_OPTIONS = {"Mesh.MinimumCirclePoints": 12, "Mesh.MinimumCurvePoints": 8}
 RESCALES = 2
 WITHIN = 0.10

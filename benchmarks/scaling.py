@@ -68,7 +68,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     when that gives more than one), nested iteration (:meth:`FrameField.nested`): ``mesh``
     meshes every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``),
     and the Newton and Krylov counts are the finest level's (every level's in ``levels``);
-    with ``nested_meshes`` the levels are :func:`ufl_frames.geometry.build_nested`'s (the
+    with ``nested_meshes`` the levels are :func:`ufl_frames.mesh.build_nested`'s (the
     coarsest split, as ``ufl-frames solve --nested-meshes``) instead of meshed by Gmsh."""
     from ufl_frames.bootstrap import init_petsc
 
@@ -77,8 +77,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 
     from mpi4py import MPI
 
-    from ufl_frames import geometry
     from ufl_frames.cli import auto_levels
+    from ufl_frames.mesh import build, build_nested
     from ufl_frames.pipeline import FrameField
 
     comm = MPI.COMM_WORLD
@@ -96,11 +96,11 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         return value
 
     def meshes():
-        fine = geometry.build(comm, shape, h)
+        fine = build(comm, shape, h)
         count = auto_levels(fine.num_cells) if levels == "auto" else int(levels)
         if nested_meshes and count > 1:
-            return geometry.build_nested(comm, shape, count, h)
-        return [geometry.build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)] + [fine]
+            return build_nested(comm, shape, count, h)
+        return [build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)] + [fine]
 
     domains = stage("mesh", meshes)
     domain = domains[-1]

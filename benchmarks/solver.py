@@ -99,8 +99,9 @@ import dolfinx.fem.petsc  # noqa: E402, F401
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, solvers  # noqa: E402
+from ufl_frames import solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.mesh import annulus  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 #: Triangles of the Gmsh annulus at mesh size 0.05 (triangles ~ 1/h²).
@@ -134,7 +135,7 @@ def test_field(x):
 
 def bench_size(comm, h, args):
     start = time.perf_counter()
-    mesh = geometry.annulus(comm, mesh_size=h).mesh
+    mesh = annulus(comm, mesh_size=h).mesh
     t_mesh = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     V = energy.frame_space(mesh)
     start = time.perf_counter()
@@ -252,7 +253,7 @@ def refinement_study(comm, args):
     tao_type = args.study_tao_type
     rows = []
     for h in args.study_sizes:
-        mesh = geometry.annulus(comm, mesh_size=h).mesh
+        mesh = annulus(comm, mesh_size=h).mesh
         q = mbo.mbo_frame_field(energy.frame_space(mesh))
         problem = solvers.frame_problem(q, isotropic=True)
         result = solvers.solve(

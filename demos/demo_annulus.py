@@ -171,11 +171,12 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, io, solvers  # noqa: E402
+from ufl_frames import io, solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.constraints import frame_constraints  # noqa: E402
 from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
 from ufl_frames.frames2d import odeco, singularities  # noqa: E402
+from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 comm = MPI.COMM_WORLD
@@ -203,11 +204,11 @@ pg_max_it = 10 if CI else 200  # projected gradient iterations (fixed count)
 
 # ### Mesh and initial field
 #
-# `geometry.build` meshes the annulus with Gmsh (on rank 0) and distributes it; it
+# `ufl_frames.mesh.build` meshes the annulus with Gmsh (on rank 0) and distributes it; it
 # returns a `Domain` (the mesh, its boundary curves and corners, the Euler
 # characteristic). The frame field lives in $[P_1]^5$.
 
-mesh = geometry.build(comm, "annulus", mesh_size).mesh
+mesh = build(comm, "annulus", mesh_size).mesh
 V = energy.frame_space(mesh)
 num_vertices = mesh.topology.index_map(0).size_global
 say(f"annulus: {num_vertices} vertices, "

@@ -44,7 +44,8 @@ from pathlib import Path  # noqa: E402
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, io  # noqa: E402
+from ufl_frames import io  # noqa: E402
+from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 
 comm = MPI.COMM_WORLD
@@ -69,7 +70,7 @@ def say(text):
 # of the triangles.
 
 # +
-domains = [geometry.build(comm, "piano", mesh_size=h, size_factor=2.0**k)
+domains = [build(comm, "piano", mesh_size=h, size_factor=2.0**k)
            for k in range(levels - 1, -1, -1)]
 for domain in domains:
     say(f"mesh: {domain.num_cells} triangles, mean edge {domain.mesh_size:.4f}")

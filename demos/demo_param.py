@@ -50,7 +50,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry  # noqa: E402
+import ufl_frames.mesh  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 
@@ -85,7 +85,7 @@ def report(name, quality):
 # circle, and across it $V$ jumps by $2\pi$ (a translation, no rotation).
 
 # +
-annulus = geometry.annulus(comm, h)
+annulus = ufl_frames.mesh.annulus(comm, h)
 V = energy.frame_space(annulus.mesh)
 exact = energy.interpolate_frames(
     V, lambda x: (np.hypot(x[0], x[1]), np.hypot(x[0], x[1]), np.arctan2(x[1], x[0])))
@@ -106,7 +106,7 @@ if comm.rank == 0:
 # same map of the result.
 
 # +
-piano = geometry.piano(comm, h)
+piano = ufl_frames.mesh.piano(comm, h)
 field = FrameField.initial(piano, isotropic=False)
 report("piano, MBO field", field.parametrise())
 field.write_param(out, "piano, MBO field", stem="param_piano_mbo")

@@ -69,9 +69,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, io, solvers  # noqa: E402
+from ufl_frames import io, solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.frames2d import odeco, singularities  # noqa: E402
+from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 comm = MPI.COMM_WORLD
@@ -99,7 +100,7 @@ unbounded_it = 6 if CI else 40  # the run without aspect bound (a fixed count)
 
 # ### Mesh, initial field and its singularities
 
-mesh = geometry.build(comm, "piano", mesh_size).mesh
+mesh = build(comm, "piano", mesh_size).mesh
 V = energy.frame_space(mesh)
 num_vertices = mesh.topology.index_map(0).size_global
 say(f"piano: {num_vertices} vertices, "

@@ -44,7 +44,7 @@ from pathlib import Path  # noqa: E402
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry  # noqa: E402
+from ufl_frames.mesh import piano  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 
 comm = MPI.COMM_WORLD
@@ -86,7 +86,7 @@ def report(name, found):
 fields = {}
 for isotropic in (False, True):
     kind = "isotropic" if isotropic else "non-isotropic"
-    field = FrameField.initial(geometry.piano(comm, h), isotropic=isotropic)
+    field = FrameField.initial(piano(comm, h), isotropic=isotropic)
     result = field.solve(max_it=30 if CI else 500)
     say(f"{kind}: {result.converged_reason} after {result.iterations} iterations, "
         f"H {result.H_final:.4e}; singularities "
@@ -102,7 +102,7 @@ for isotropic in (False, True):
 # energy H cannot follow, which is why TAO's isotropic minimum of H stops short of this.
 
 # +
-fields["conformal"] = FrameField.initial(geometry.piano(comm, h), isotropic=True).conformal()
+fields["conformal"] = FrameField.initial(piano(comm, h), isotropic=True).conformal()
 # -
 
 # ## Quad meshes
@@ -135,7 +135,7 @@ for kind, field in fields.items():
 # domain, and the same two steps give quads.
 
 # +
-mbo = FrameField.initial(geometry.piano(comm, h), isotropic=False)
+mbo = FrameField.initial(piano(comm, h), isotropic=False)
 try:
     report("piano, MBO field", mbo.quadrangulate(quad_size))
     mbo.write_quads(out, "piano, MBO field", stem="quads_piano_mbo")

@@ -15,7 +15,7 @@ Modelled on DOLFINx's ``python/test/conftest.py``:
   (``tao_max_it``, say) would silently override another test's arguments.
 
 ``annulus_mesh`` (a fixture returning a function ``annulus_mesh(h, comm)``) builds the
-annulus 0.5 <= r <= 1 with :func:`ufl_frames.geometry.annulus`, or with Gmsh directly when
+annulus 0.5 <= r <= 1 with :func:`ufl_frames.mesh.annulus`, or with Gmsh directly when
 that module is not available.
 
 Nothing here needs DOLFINx, petsc4py or mpi4py to be importable: the pure NumPy tests
@@ -107,9 +107,7 @@ def _annulus_mesh(h: float, comm: MPI.Comm | None = None) -> dolfinx.mesh.Mesh:
     if comm is None:
         comm = _mpi().COMM_WORLD
     try:
-        from ufl_frames import geometry
-
-        build = geometry.annulus
+        from ufl_frames.mesh import annulus as build
     except (ImportError, AttributeError):
         return _gmsh_annulus(h, comm)
     return build(comm, mesh_size=h, r_inner=R_INNER, r_outer=R_OUTER).mesh

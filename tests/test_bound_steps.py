@@ -8,8 +8,8 @@ Serial and under MPI (``mpirun -n 2 python -m pytest -m "not serial"``).
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import geometry
 from ufl_frames.bootstrap import options_scope
+from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import ADAPT_FLOOR, GaussNewtonModel
 
@@ -25,7 +25,7 @@ def piano_solve(options=None, mesh_size=0.05):
     rule was made for: with the consistent rule (nls's default) and Gauss–Newton alone it
     costs steps (measured at h = 0.05: 91 against 29 without it), with the hybrid model,
     the default, it saves them (13 against 27; at h = 0.025 24 against 50)."""
-    domain = geometry.build(COMM, "piano", mesh_size=mesh_size)
+    domain = build(COMM, "piano", mesh_size=mesh_size)
     field = FrameField.initial(domain)
     options = {"frames_hessian": "gauss_newton", "frames_active_consistent": "false",
                **(options or {})}

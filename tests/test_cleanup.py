@@ -36,9 +36,10 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import geometry, solvers
+from ufl_frames import solvers
 from ufl_frames.bootstrap import petsc_defaults
 from ufl_frames.fem import energy
+from ufl_frames.mesh import annulus
 from ufl_frames.solvers import mbo
 
 COMM = MPI.COMM_WORLD
@@ -97,7 +98,7 @@ def assert_none_alive_in(excinfo) -> None:
 @pytest.fixture(scope="module")
 def mbo_field():
     """(V, MBO field values) on the annulus at h = 0.2, on COMM_WORLD."""
-    V = energy.frame_space(geometry.annulus(COMM, 0.2).mesh)
+    V = energy.frame_space(annulus(COMM, 0.2).mesh)
     q = mbo.mbo_frame_field(V, options_prefix="cleanup_mbo_")
     return V, q.x.array.copy()
 

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import cli, geometry
+from ufl_frames import cli
 from ufl_frames.fem import energy
 from ufl_frames.fem.conformal import conformal_field
 from ufl_frames.frames2d import odeco
+from ufl_frames.mesh import annulus, piano
 from ufl_frames.pipeline import FrameField
 
 COMM = MPI.COMM_WORLD
@@ -44,7 +45,7 @@ def length_over_r_spread(q) -> float:
 def test_annulus_lengths_become_proportional_to_r():
     spreads = []
     for h in (0.1, 0.05):
-        q = conformal_field(radial_field(geometry.annulus(COMM, h), lambda r: 1 / r))
+        q = conformal_field(radial_field(annulus(COMM, h), lambda r: 1 / r))
         lengths, angles = odeco.q_to_frames(q.x.array.reshape(-1, 5))
         assert np.allclose(lengths[:, 0], lengths[:, 1])  # isotropic
         spreads.append(length_over_r_spread(q) - 1)
@@ -53,7 +54,7 @@ def test_annulus_lengths_become_proportional_to_r():
 
 
 def test_directions_are_kept_and_the_norm_too():
-    domain = geometry.piano(COMM, 0.1)
+    domain = piano(COMM, 0.1)
     field = FrameField.initial(domain, isotropic=True)
     q = conformal_field(field.q)
     _, before = odeco.q_to_frames(field.q.x.array.reshape(-1, 5))
@@ -75,7 +76,7 @@ def test_directions_are_kept_and_the_norm_too():
 def test_piano_conformal_field_integrates_and_is_the_same_on_any_ranks():
     misfits, mbo_misfits = [], []
     for h in (0.05, 0.025):
-        field = FrameField.initial(geometry.piano(COMM, h), isotropic=True)
+        field = FrameField.initial(piano(COMM, h), isotropic=True)
         mbo_misfits.append(field.parametrise()["misfit"])
         found = field.conformal().parametrise()
         assert found["flipped_triangles"] == 0 and field.conformal_scale
@@ -83,9 +84,9 @@ def test_piano_conformal_field_integrates_and_is_the_same_on_any_ranks():
     assert misfits[1] < 0.7 * misfits[0], misfits  # measured 0.038 -> 0.023
     assert mbo_misfits[1] > 0.9 * mbo_misfits[0], mbo_misfits  # 0.085 -> 0.081
     assert misfits[0] < 0.5 * mbo_misfits[0]
-    alone = FrameField.initial(geometry.piano(MPI.COMM_SELF, 0.05), isotropic=True)
+    alone = FrameField.initial(piano(MPI.COMM_SELF, 0.05), isotropic=True)
     assert alone.conformal().parametrise()["misfit"] == pytest.approx(
-        FrameField.initial(geometry.piano(COMM, 0.05), isotropic=True).conformal()
+        FrameField.initial(piano(COMM, 0.05), isotropic=True).conformal()
         .parametrise()["misfit"], rel=1e-6)
 
 

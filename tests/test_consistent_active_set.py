@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import checkpoint, geometry
+from ufl_frames import checkpoint
 from ufl_frames.bootstrap import options_scope
+from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import CONSISTENT_ROUNDS, GaussNewtonModel
 
@@ -25,7 +26,7 @@ HELD = {"frames_active_consistent": "false"}  # the hold-and-release rule instea
 def piano_solve(options=None, **solve):
     """The non-isotropic piano at h = 0.05 from MBO, ``options`` on top of the defaults
     (``solve``: more arguments of :meth:`FrameField.solve`)."""
-    field = FrameField.initial(geometry.build(COMM, "piano", mesh_size=0.05))
+    field = FrameField.initial(build(COMM, "piano", mesh_size=0.05))
     with options_scope(list((options or {}).items())):
         result = field.solve(max_it=500, **solve)
     return field, result
@@ -110,7 +111,7 @@ def test_resumed_after_a_step_that_left_releases_as_the_uninterrupted_solve(tmp_
     assert left, "no step left releases to the next"
     state = left[0]
     out = Path(COMM.bcast(str(tmp_path), root=0))
-    field = FrameField.initial(geometry.build(COMM, "piano", mesh_size=0.05))
+    field = FrameField.initial(build(COMM, "piano", mesh_size=0.05))
     V = field.q.function_space
     store = checkpoint.CheckpointFolder(out, COMM, {"case": "piano"}, "key")
     store.save(state, V)

@@ -1,4 +1,4 @@
-"""Meshes from ufl_frames.geometry: built-in shapes, user files, errors; serial and MPI."""
+"""Meshes from ufl_frames.mesh: built-in shapes, user files, errors; serial and MPI."""
 
 import math
 from pathlib import Path
@@ -16,9 +16,21 @@ import gmsh  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry  # noqa: E402
 from ufl_frames.frames2d.singularities import locate_singularities  # noqa: E402
-from ufl_frames.geometry import GeometryError  # noqa: E402
+from ufl_frames.mesh import (  # noqa: E402
+    Domain,
+    GeometryError,
+    annulus,
+    build,
+    build_nested,
+    load,
+    meshing,  # noqa: E402
+    piano,
+    piano_area,
+    piano_perimeter,
+    piano_points,
+)
+from ufl_frames.mesh.builtin import PIANO_CONCAVE_RADIUS, PIANO_CONVEX_RADIUS  # noqa: E402
 
 MESHES = Path(__file__).resolve().parents[1] / "meshes"
 COMM = MPI.COMM_WORLD
@@ -36,7 +48,7 @@ def num_cells(domain):
 
 
 def assert_p1_triangles_2d(domain):
-    assert isinstance(domain, geometry.Domain)
+    assert isinstance(domain, Domain)
     mesh = domain.mesh
     assert mesh.geometry.dim == 2
     assert mesh.topology.dim == 2
@@ -49,7 +61,7 @@ def assert_p1_triangles_2d(domain):
 
 
 def test_annulus_area_and_boundary():
-    mesh = geometry.annulus(COMM, H)
+    mesh = annulus(COMM, H)
     assert_p1_triangles_2d(mesh)
     # Inscribed polygons: both errors are O(h²) and negative.
     assert integrate(mesh, ufl.dx) == pytest.approx(3 * math.pi / 4, rel=2e-3)
@@ -59,19 +71,19 @@ def test_annulus_area_and_boundary():
 
 
 def test_annulus_custom_radii():
-    mesh = geometry.annulus(COMM, 0.2, r_inner=1.0, r_outer=2.0)
+    mesh = annulus(COMM, 0.2, r_inner=1.0, r_outer=2.0)
     assert integrate(mesh, ufl.dx) == pytest.approx(3 * math.pi, rel=5e-3)
     with pytest.raises(GeometryError, match="r_inner must be smaller"):
-        geometry.annulus(COMM, 0.2, r_inner=1.0, r_outer=0.5)
+        annulus(COMM, 0.2, r_inner=1.0, r_outer=0.5)
     with pytest.raises(GeometryError, match="r_inner"):
-        geometry.annulus(COMM, 0.2, r_inner=-1.0)
+        annulus(COMM, 0.2, r_inner=-1.0)
 
 
 def test_piano_area_and_boundary():
-    mesh = geometry.piano(COMM, H)
+    mesh = piano(COMM, H)
     assert_p1_triangles_2d(mesh)
-    assert integrate(mesh, ufl.dx) == pytest.approx(geometry.piano_area(), rel=2e-3)
-    assert integrate(mesh, ufl.ds) == pytest.approx(geometry.piano_perimeter(), rel=2e-3)
+    assert integrate(mesh, ufl.dx) == pytest.approx(piano_area(), rel=2e-3)
+    assert integrate(mesh, ufl.ds) == pytest.approx(piano_perimeter(), rel=2e-3)
     x = COMM.allgather(mesh.mesh.geometry.x[:, :2])
     x = np.concatenate(x)
     assert np.allclose(x.min(axis=0), [0, 0]) and np.allclose(x.max(axis=0), [2, 1.2])
@@ -81,9 +93,9 @@ def test_large_meshes_are_refined_coarse_meshes(monkeypatch):
     """Above REFINE_ABOVE triangles Gmsh meshes at 2^k h and splits k times: about the
     same count and edge length as meshing at h, the new boundary points on the circles
     (to rounding; a chord midpoint would be off by h²/8r), and a note says so."""
-    direct = geometry.annulus(COMM, 0.05)
-    monkeypatch.setattr(geometry, "REFINE_ABOVE", 300)
-    refined = geometry.annulus(COMM, 0.05)
+    direct = annulus(COMM, 0.05)
+    monkeypatch.setattr(meshing, "REFINE_ABOVE", 300)
+    refined = annulus(COMM, 0.05)
     assert any("refined 2 time(s)" in note for note in refined.notes), refined.notes
     assert not any("refined" in note for note in direct.notes)
     assert 0.7 < num_cells(refined) / num_cells(direct) < 1.4
@@ -107,8 +119,8 @@ def test_refinements_give_a_mesh_nested_in_the_coarser_one(shape):
     triangles per split and all its vertices; the new boundary vertices lie on the
     curves (the annulus' circles to rounding), the new interior ones at midpoints of
     coarse edges."""
-    coarse = geometry.build(COMM, shape, mesh_size=H, size_factor=2.0)
-    fine = geometry.build(COMM, shape, mesh_size=H, refinements=1)
+    coarse = build(COMM, shape, mesh_size=H, size_factor=2.0)
+    fine = build(COMM, shape, mesh_size=H, refinements=1)
     assert num_cells(fine) == 4 * num_cells(coarse)
     coarse_vertices, fine_vertices = _vertices(coarse), _vertices(fine)
     assert coarse_vertices <= fine_vertices
@@ -128,8 +140,8 @@ def test_build_nested_splits_one_coarse_mesh():
     """Coarse to fine, four times the triangles per level from one Gmsh mesh; the finest
     about the requested size (where the coarsest is not held finer by the curves' points
     per turn, as the piano's is at 0.4)."""
-    levels = geometry.build_nested(COMM, "piano", 3, mesh_size=H / 2)
-    direct = geometry.build(COMM, "piano", mesh_size=H / 2)
+    levels = build_nested(COMM, "piano", 3, mesh_size=H / 2)
+    direct = build(COMM, "piano", mesh_size=H / 2)
     counts = [num_cells(d) for d in levels]
     assert counts == [counts[0], 4 * counts[0], 16 * counts[0]]
     assert levels[-1].mesh_size == pytest.approx(direct.mesh_size, rel=0.15)
@@ -140,20 +152,20 @@ def test_build_nested_splits_one_coarse_mesh():
 @pytest.mark.parametrize("value", [-1, 1.5, True, "2"])
 def test_refinements_must_be_a_non_negative_integer(value):
     with pytest.raises(GeometryError, match="refinements must be a non-negative integer"):
-        geometry.build(COMM, "piano", mesh_size=H, refinements=value)
+        build(COMM, "piano", mesh_size=H, refinements=value)
     with pytest.raises(GeometryError, match="levels must be a positive integer"):
-        geometry.build_nested(COMM, "piano", 0, mesh_size=H)
+        build_nested(COMM, "piano", 0, mesh_size=H)
 
 
 def test_mesh_size_refines():
-    coarse, fine = geometry.piano(COMM, 0.2), geometry.piano(COMM, 0.1)
+    coarse, fine = piano(COMM, 0.2), piano(COMM, 0.1)
     assert 3 < num_cells(fine) / num_cells(coarse) < 5
 
 
 @pytest.mark.parametrize("name", ["annulus", "piano"])
 def test_geo_sources_match_builders(name):
-    built = geometry.build(COMM, name, H)
-    loaded = geometry.load(COMM, MESHES / f"{name}.geo", H)
+    built = build(COMM, name, H)
+    loaded = load(COMM, MESHES / f"{name}.geo", H)
     assert num_cells(loaded) == num_cells(built)
     assert integrate(loaded, ufl.dx) == pytest.approx(integrate(built, ufl.dx), rel=1e-12)
     assert integrate(loaded, ufl.ds) == pytest.approx(integrate(built, ufl.ds), rel=1e-12)
@@ -162,8 +174,8 @@ def test_geo_sources_match_builders(name):
 @pytest.mark.parametrize("name", ["annulus", "piano"])
 def test_distributed_mesh_has_all_cells(name):
     """Built on rank 0 and distributed: same global cells as a mesh built on each rank alone."""
-    whole = geometry.build(COMM, name, H)
-    alone = geometry.build(MPI.COMM_SELF, name, H)
+    whole = build(COMM, name, H)
+    alone = build(MPI.COMM_SELF, name, H)
     assert num_cells(whole) == num_cells(alone)
     local = whole.mesh.topology.index_map(2).size_local
     assert COMM.allreduce(local, op=MPI.SUM) == num_cells(alone)
@@ -173,7 +185,7 @@ def test_distributed_mesh_has_all_cells(name):
 
 def test_quiet_by_default(capfd, monkeypatch):
     monkeypatch.delenv("UFL_FRAMES_GMSH_VERBOSE", raising=False)
-    geometry.piano(COMM, 0.3)
+    piano(COMM, 0.3)
     out, err = capfd.readouterr()
     assert "Info" not in out + err
 
@@ -188,8 +200,8 @@ def harmonic_cross_field(mesh):
     All straight sides of the piano are axis-parallel (z = 1); on the arcs z =
     e^{4i·angle(x − centre)}, which is 1 at their ends, so z is continuous.
     """
-    pts = geometry.piano_points()
-    arcs = [(pts[6], geometry.PIANO_CONCAVE_RADIUS), (pts[7], geometry.PIANO_CONVEX_RADIUS)]
+    pts = piano_points()
+    arcs = [(pts[6], PIANO_CONCAVE_RADIUS), (pts[7], PIANO_CONVEX_RADIUS)]
 
     def boundary_z(x):
         z = np.ones(x.shape[1], dtype=complex)
@@ -229,7 +241,7 @@ def harmonic_cross_field(mesh):
 
 @pytest.mark.parametrize("h", [0.1, 0.05])
 def test_piano_has_plus_left_and_minus_right(h):
-    found = locate_singularities(harmonic_cross_field(geometry.piano(COMM, h).mesh))
+    found = locate_singularities(harmonic_cross_field(piano(COMM, h).mesh))
     assert [s["index"] for s in found] == [0.25, -0.25], found
     plus, minus = found
     assert plus["x"] < 0.7 and minus["x"] > 1.3
@@ -238,7 +250,7 @@ def test_piano_has_plus_left_and_minus_right(h):
 
 
 def test_annulus_has_no_singularity():
-    mesh = geometry.annulus(COMM, 0.15).mesh
+    mesh = annulus(COMM, 0.15).mesh
     W = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (5,)))
     q = dolfinx.fem.Function(W)
     # Cross aligned with e_r: 4t = 4 * polar angle.
@@ -289,12 +301,12 @@ def test_load_user_rectangle(tmp_path, suffix):
         path = write_rectangle(tmp_path, ".step").rename(tmp_path / "rect.stp")
     else:
         path = write_rectangle(tmp_path, suffix)
-    mesh = geometry.load(COMM, path, mesh_size=0.25)
+    mesh = load(COMM, path, mesh_size=0.25)
     assert_p1_triangles_2d(mesh)
     assert integrate(mesh, ufl.dx) == pytest.approx(2.0, rel=1e-12)
     assert integrate(mesh, ufl.ds) == pytest.approx(6.0, rel=1e-12)
     # build() takes paths (str or Path) too; mesh_size matters except for .msh.
-    finer = geometry.build(COMM, str(path), mesh_size=0.125)
+    finer = build(COMM, str(path), mesh_size=0.125)
     if suffix == ".msh":
         assert num_cells(finer) == num_cells(mesh)
     else:
@@ -314,7 +326,7 @@ def test_msh_without_physical_groups_and_second_order(tmp_path):
         gmsh.write(str(path))
     finally:
         gmsh.finalize()
-    mesh = geometry.load(COMM, path)
+    mesh = load(COMM, path)
     assert_p1_triangles_2d(mesh)
     assert integrate(mesh, ufl.dx) == pytest.approx(math.pi, rel=0.05)
 
@@ -325,9 +337,9 @@ def test_caller_gmsh_session_is_kept():
         gmsh.model.add("mine")
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("Mesh.MeshSizeMax", 7.0)
-        geometry.piano(COMM, 0.3)
+        piano(COMM, 0.3)
         with pytest.raises(GeometryError):
-            geometry.load(COMM, MESHES / "no-such-file.geo")
+            load(COMM, MESHES / "no-such-file.geo")
         assert gmsh.isInitialized()
         assert gmsh.model.getCurrent() == "mine"
         assert gmsh.option.getNumber("Mesh.MeshSizeMax") == 7.0
@@ -350,8 +362,8 @@ def raises_one_line(match, call, *args, **kwargs):
 
 def test_missing_file(tmp_path):
     for suffix in (".geo", ".msh", ".step"):
-        raises_one_line("not found", geometry.load, COMM, tmp_path / f"none{suffix}")
-    raises_one_line("not found", geometry.build, COMM, str(tmp_path / "none.msh"))
+        raises_one_line("not found", load, COMM, tmp_path / f"none{suffix}")
+    raises_one_line("not found", build, COMM, str(tmp_path / "none.msh"))
 
 
 @pytest.mark.parametrize(
@@ -367,10 +379,10 @@ def test_missing_file(tmp_path):
 def test_corrupt_file(tmp_path, suffix, content, match):
     path = tmp_path / f"corrupt{suffix}"
     path.write_bytes(content)
-    message = raises_one_line(match, geometry.load, COMM, path)
+    message = raises_one_line(match, load, COMM, path)
     assert "corrupt" in message
     # A failed parse must not break later ones (Gmsh keeps a broken lexer otherwise).
-    mesh = geometry.load(COMM, write_rectangle(tmp_path, ".geo"), mesh_size=0.5)
+    mesh = load(COMM, write_rectangle(tmp_path, ".geo"), mesh_size=0.5)
     assert integrate(mesh, ufl.dx) == pytest.approx(2.0)
 
 
@@ -386,13 +398,13 @@ def test_3d_mesh_rejected(tmp_path):
         gmsh.write(str(path))
     finally:
         gmsh.finalize()
-    raises_one_line("3D mesh.*tetrahedra", geometry.load, COMM, path)
+    raises_one_line("3D mesh.*tetrahedra", load, COMM, path)
 
 
 def test_volume_geometry_rejected(tmp_path):
     path = tmp_path / "box.geo"
     path.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 1, 1};\n')
-    raises_one_line("volumes", geometry.load, COMM, path)
+    raises_one_line("volumes", load, COMM, path)
 
 
 def test_non_planar_and_empty_rejected(tmp_path):
@@ -401,27 +413,27 @@ def test_non_planar_and_empty_rejected(tmp_path):
         'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n'
         "Rotate {{1, 0, 0}, {0, 0, 0}, 0.3} { Surface{1}; }\n"
     )
-    raises_one_line("not planar", geometry.load, COMM, tilted)
+    raises_one_line("not planar", load, COMM, tilted)
     empty = tmp_path / "points.geo"
     empty.write_text("Point(1) = {0, 0, 0};\n")
-    raises_one_line("no 2D surface", geometry.load, COMM, empty)
+    raises_one_line("no 2D surface", load, COMM, empty)
 
 
 def test_unknown_name_and_extension(tmp_path):
-    message = raises_one_line("unknown geometry 'violin'", geometry.build, COMM, "violin")
+    message = raises_one_line("unknown geometry 'violin'", build, COMM, "violin")
     assert "annulus" in message and "piano" in message
     text = tmp_path / "shape.txt"
     text.write_text("hello")
-    raises_one_line("unsupported geometry file extension '.txt'", geometry.load, COMM, text)
-    raises_one_line("unsupported", geometry.build, COMM, text)
+    raises_one_line("unsupported geometry file extension '.txt'", load, COMM, text)
+    raises_one_line("unsupported", build, COMM, text)
 
 
 @pytest.mark.parametrize("bad", [-0.1, 0.0, float("nan"), float("inf"), "0.1", None, True])
 def test_bad_mesh_size(bad):
-    raises_one_line("mesh_size must be a positive finite number", geometry.piano, COMM, bad)
-    raises_one_line("mesh_size", geometry.annulus, COMM, bad)
+    raises_one_line("mesh_size must be a positive finite number", piano, COMM, bad)
+    raises_one_line("mesh_size", annulus, COMM, bad)
     if bad is None:
         return  # build() and load() take None: a size relative to the shape
-    raises_one_line("mesh_size", geometry.build, COMM, "piano", bad)
-    raises_one_line("mesh_size", geometry.load, COMM, MESHES / "piano.geo", bad)
-    raises_one_line("size_factor", geometry.build, COMM, "piano", 0.1, bad)
+    raises_one_line("mesh_size", build, COMM, "piano", bad)
+    raises_one_line("mesh_size", load, COMM, MESHES / "piano.geo", bad)
+    raises_one_line("size_factor", build, COMM, "piano", 0.1, bad)

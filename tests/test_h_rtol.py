@@ -15,7 +15,7 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import geometry
+from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers import tao
 
@@ -102,7 +102,7 @@ def gauss_newton_piano():
         opts = PETSc.Options()
         opts[f"{prefix}frames_hessian"] = "gauss_newton"
         opts[f"{prefix}frames_h_rtol"] = rtol
-        domain = geometry.build(MPI.COMM_WORLD, "piano", mesh_size=0.1)
+        domain = build(MPI.COMM_WORLD, "piano", mesh_size=0.1)
         field = FrameField.initial(domain, isotropic=False, max_aspect=4.0)
         result = field.solve(max_it=300, options_prefix=prefix)
         results[name] = (result, sorted(s["index"] for s in field.singularities))

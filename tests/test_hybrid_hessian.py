@@ -8,8 +8,8 @@ Serial and under MPI (``mpirun -n 2 python -m pytest -m "not serial"``).
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import geometry
 from ufl_frames.bootstrap import options_scope
+from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import HYBRID_SWITCH, GaussNewtonModel
 
@@ -22,7 +22,7 @@ MESH_SIZE = 0.1
 def piano_solve(options=None, checkpoint=None, resume=None, field=None):
     """The non-isotropic piano from MBO with ``options`` on top of the defaults."""
     if field is None:
-        field = FrameField.initial(geometry.build(COMM, "piano", mesh_size=MESH_SIZE))
+        field = FrameField.initial(build(COMM, "piano", mesh_size=MESH_SIZE))
     with options_scope(list((options or {}).items())):
         return field.solve(max_it=500, checkpoint=checkpoint, resume=resume)
 

@@ -15,8 +15,8 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import geometry
 from ufl_frames.fem import energy, kernels
+from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import sobolev_form
 
@@ -38,7 +38,7 @@ def test_compiled_model_matrix_equals_the_ufl_form(shape, field, exact):
     coefficients (the formulas hold for any q: no property of frames is used; there the
     residual r, which only the Hessian's second term sees, is large), with a damping that
     changes between assemblies (the Constants are read each time)."""
-    domain = geometry.build(COMM, shape, mesh_size=0.1)
+    domain = build(COMM, shape, mesh_size=0.1)
     q = FrameField.initial(domain).q
     if field == "arbitrary":
         x = q.function_space.tabulate_dof_coordinates()
@@ -97,7 +97,7 @@ def test_reduced_model_matrix_equals_the_product_with_the_basis(columns, exact):
     matrix (itself tested against UFL above) with a block-diagonal T: arbitrary 5 × c
     blocks a vertex, a zero column at some vertices (an absent direction), in parallel
     with the ghost vertices' blocks from their owners."""
-    domain = geometry.build(COMM, "piano", mesh_size=0.1)
+    domain = build(COMM, "piano", mesh_size=0.1)
     q = FrameField.initial(domain).q
     V, mesh = q.function_space, q.function_space.mesh
     n = V.dofmap.index_map.size_local
@@ -128,7 +128,7 @@ def test_reduced_model_matrix_equals_the_product_with_the_basis(columns, exact):
 def test_model_action_equals_the_matrix_product(exact):
     """The vector of :func:`kernels.model_action_form` equals the 5N matrix times the
     field, on an arbitrary direction, serial and in parallel (ghost sums added)."""
-    domain = geometry.build(COMM, "annulus", mesh_size=0.1)
+    domain = build(COMM, "annulus", mesh_size=0.1)
     q = FrameField.initial(domain).q
     V, mesh = q.function_space, q.function_space.mesh
     damping = fem.Constant(mesh, PETSc.ScalarType(0.2))
@@ -151,7 +151,7 @@ def test_model_action_equals_the_matrix_product(exact):
 
 
 def test_reduced_form_rejects_a_basis_of_the_wrong_shape():
-    domain = geometry.build(COMM, "annulus", mesh_size=0.2)
+    domain = build(COMM, "annulus", mesh_size=0.2)
     q = FrameField.initial(domain).q
     mesh = q.function_space.mesh
     constant = fem.Constant(mesh, PETSc.ScalarType(1.0))

@@ -19,9 +19,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import geometry, solvers
+from ufl_frames import solvers
 from ufl_frames.fem import energy
 from ufl_frames.frames2d import odeco
+from ufl_frames.mesh import piano
 from ufl_frames.solvers import mbo
 
 COMM = MPI.COMM_WORLD
@@ -30,7 +31,7 @@ COMM = MPI.COMM_WORLD
 def perturbed_piano(max_aspect, prefix):
     """The non-isotropic piano at h = 0.2: the MBO field with lengths 1 + 2 sin²(3x) and 1
     (up to 3:1) and a smooth extra rotation, retracted with the bound ``max_aspect``."""
-    domain = geometry.piano(COMM, mesh_size=0.2)
+    domain = piano(COMM, mesh_size=0.2)
     q = mbo.mbo_frame_field(energy.frame_space(domain.mesh), options_prefix=prefix)
     p = q.function_space.tabulate_dof_coordinates()[:, :2]
     lengths = np.stack([1 + 2 * np.sin(3 * p[:, 0]) ** 2, np.ones(len(p))], axis=1)

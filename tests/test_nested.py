@@ -12,11 +12,13 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import cli, geometry, solvers
+import ufl_frames.mesh
+from ufl_frames import cli, solvers
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.fem import energy
 from ufl_frames.fem.transfer import interpolate_field
 from ufl_frames.frames2d import odeco
+from ufl_frames.mesh import GeometryError, build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers import tao
 
@@ -33,8 +35,8 @@ def affine(x):
 def test_interpolate_field_reproduces_affine_fields(shape):
     """Between two independent Gmsh meshes of a curved domain (fine boundary vertices
     lie outside the coarse polygon): an affine field comes through exactly."""
-    coarse = geometry.build(COMM, shape, mesh_size=0.2)
-    fine = geometry.build(COMM, shape, mesh_size=0.07)
+    coarse = build(COMM, shape, mesh_size=0.2)
+    fine = build(COMM, shape, mesh_size=0.07)
     q = energy.frame_space(coarse.mesh)
     f = dolfinx.fem.Function(q)
     f.interpolate(affine)
@@ -45,8 +47,8 @@ def test_interpolate_field_reproduces_affine_fields(shape):
 
 
 def test_interpolate_field_refuses_another_domain():
-    piano = geometry.build(COMM, "piano", mesh_size=0.2)
-    annulus = geometry.build(COMM, "annulus", mesh_size=0.2)
+    piano = build(COMM, "piano", mesh_size=0.2)
+    annulus = build(COMM, "annulus", mesh_size=0.2)
     f = FrameField.initial(piano).q
     with pytest.raises(ValueError, match="not the same domain"):
         interpolate_field(f, annulus.mesh)
@@ -54,7 +56,7 @@ def test_interpolate_field_refuses_another_domain():
 
 @pytest.fixture(scope="module")
 def piano_nested():
-    domains = [geometry.build(COMM, "piano", mesh_size=0.1, size_factor=2.0 ** k)
+    domains = [build(COMM, "piano", mesh_size=0.1, size_factor=2.0 ** k)
                for k in (1, 0)]
     levels = []
     field = FrameField.nested(domains, max_it=300, level_monitor=levels.append)
@@ -103,7 +105,7 @@ def test_nested_fine_level_stops_at_the_discretisation_accuracy():
     the coarser level's gain (H_c − H*: the discretisation error the test compares with;
     measured 0.3 % of H at 10⁵ triangles). Piano at h = 0.1 / 0.05 (measured: 17 of 19
     steps; at h = 0.2 / 0.1 the gradient test comes first)."""
-    domains = [geometry.build(COMM, "piano", mesh_size=0.05, size_factor=2.0 ** k)
+    domains = [build(COMM, "piano", mesh_size=0.05, size_factor=2.0 ** k)
                for k in (1, 0)]
     field, levels = nested_with(domains)
     full, full_levels = nested_with(domains, frames_nested_rtol=0.0)
@@ -159,7 +161,7 @@ def test_pin_radius_holds_a_disk_around_each_singular_triangle():
     triangle's own vertices; radius 0 holds the two triangles' six vertices only."""
     from ufl_frames.fem.constraints import frame_constraints, pin_singularities
 
-    field = FrameField.initial(geometry.build(COMM, "piano", mesh_size=0.05))
+    field = FrameField.initial(build(COMM, "piano", mesh_size=0.05))
     V = field.q.function_space
     rows = field.q.x.array.reshape(-1, 5)
     base = frame_constraints(V, boundary_angles=field.boundary_angles)
@@ -188,7 +190,7 @@ def test_nested_pins_a_disk_of_the_coarsest_mesh_size():
     the +1/4 (4 singularities; benchmarks/README.md "Pinned singularities escape"). Held in a disk
     of the coarse mesh's size (``pin_radius``), both levels end with MBO's two, within a
     coarse edge of where MBO put them."""
-    domains = [geometry.build(COMM, "piano", mesh_size=0.03434, size_factor=2.0 ** k)
+    domains = [build(COMM, "piano", mesh_size=0.03434, size_factor=2.0 ** k)
                for k in (1, 0)]
     radius = domains[0].mesh_size
     field = FrameField.nested(domains, max_it=300, pin_radius=radius)
@@ -355,15 +357,15 @@ def test_nested_meshes_flag_reaches_run_solve():
 def test_nested_meshes_fall_back_one_level_when_the_coarsest_fails(monkeypatch):
     """--levels auto --nested-meshes: a coarsest mesh Gmsh cannot make (or that loses a
     hole) means one level fewer, said in a note; with --levels given it is an error."""
-    real = geometry.build_nested
+    real = ufl_frames.mesh.build_nested
 
     def build_nested(comm, name, levels, *args, **kwargs):
         if levels > 2:
-            raise geometry.GeometryError("too coarse to mesh")
+            raise GeometryError("too coarse to mesh")
         return real(comm, name, levels, *args, **kwargs)
 
-    monkeypatch.setattr(geometry, "build_nested", build_nested)
-    domain = geometry.build(COMM, "piano", mesh_size=0.05)
+    monkeypatch.setattr(ufl_frames.mesh, "build_nested", build_nested)
+    domain = build(COMM, "piano", mesh_size=0.05)
     said = []
     coarse, fine = cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, True,
                                       said.append)
@@ -376,7 +378,7 @@ def test_nested_meshes_fall_back_one_level_when_the_coarsest_fails(monkeypatch):
 def test_a_coarse_level_must_keep_the_holes():
     from types import SimpleNamespace
 
-    with pytest.raises(geometry.GeometryError, match="Euler characteristic 1, not 0"):
+    with pytest.raises(GeometryError, match="Euler characteristic 1, not 0"):
         cli._check_same_topology(SimpleNamespace(euler_characteristic=1),
                                  SimpleNamespace(euler_characteristic=0), 4)
     cli._check_same_topology(SimpleNamespace(euler_characteristic=0),

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import geometry
 from ufl_frames.fem import energy
+from ufl_frames.mesh import annulus
 from ufl_frames.pipeline import FrameField
 
 
 def exact_annulus_field(comm, h):
-    domain = geometry.annulus(comm, h)
+    domain = annulus(comm, h)
     V = energy.frame_space(domain.mesh)
     q = energy.interpolate_frames(
         V, lambda x: (np.hypot(x[0], x[1]), np.hypot(x[0], x[1]), np.arctan2(x[1], x[0])))

@@ -11,8 +11,9 @@ init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry, io  # noqa: E402
+from ufl_frames import io  # noqa: E402
 from ufl_frames.frames2d.aspect import aspect_bound  # noqa: E402
+from ufl_frames.mesh import annulus, load, piano  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 
 COMM = MPI.COMM_WORLD
@@ -28,7 +29,7 @@ def test_aspect_bound(isotropic, given, expected):
 
 def test_frame_field_on_the_piano(tmp_path):
     out = Path(COMM.bcast(str(tmp_path), root=0))
-    domain = geometry.piano(COMM, 0.15)
+    domain = piano(COMM, 0.15)
     field = FrameField.initial(domain, isotropic=False, max_aspect=4.0)
     # The MBO field already has the piano's pair, and Poincaré–Hopf holds for it.
     assert sorted(s["index"] for s in field.singularities) == [-0.25, 0.25]
@@ -53,7 +54,7 @@ def test_solver_reuses_the_mbo_constraints():
     from ufl_frames import solvers
     from ufl_frames.fem.constraints import frame_constraints
 
-    field = FrameField.initial(geometry.annulus(COMM, 0.2), isotropic=False, max_aspect=3.0)
+    field = FrameField.initial(annulus(COMM, 0.2), isotropic=False, max_aspect=3.0)
     q0 = field.q.x.array.copy()
     reused = solvers.frame_problem(field.q, max_aspect=3.0, constraints=field.constraints,
                                   pin_singularities=False).constraints
@@ -79,7 +80,7 @@ def test_the_whole_run_does_not_depend_on_the_domain_size(tmp_path, unit):
                             f"Disk(2) = {{{w / 2}, {h / 2}, 0, {r}}};\n"
                             "BooleanDifference{ Surface{1}; Delete; }{ Surface{2}; Delete; }\n")
         COMM.Barrier()
-        field = FrameField.initial(geometry.load(COMM, Path(COMM.bcast(str(path))), 8 * scale),
+        field = FrameField.initial(load(COMM, Path(COMM.bcast(str(path))), 8 * scale),
                                    isotropic=True)
         results[scale] = field.solve(max_it=50)
         assert results[scale].converged_reason.startswith("CONVERGED"), results[scale]

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import cli, geometry
+from ufl_frames import cli
+from ufl_frames.mesh import piano
 from ufl_frames.pipeline import FrameField
 
 COMM = MPI.COMM_WORLD
@@ -24,7 +25,7 @@ def piano_fields(request):
     """The optimised piano field at h = 0.05, on COMM_SELF and on COMM_WORLD."""
     fields = {}
     for name, comm in (("self", MPI.COMM_SELF), ("world", COMM)):
-        field = FrameField.initial(geometry.piano(comm, 0.05), isotropic=request.param)
+        field = FrameField.initial(piano(comm, 0.05), isotropic=request.param)
         field.solve()
         fields[name] = field
     return fields

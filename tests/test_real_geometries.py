@@ -16,11 +16,12 @@ import gmsh  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import geometry  # noqa: E402
+import ufl_frames.mesh  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.constraints import frame_constraints  # noqa: E402
 from ufl_frames.frames2d import singularities  # noqa: E402
-from ufl_frames.geometry import GeometryError  # noqa: E402
+from ufl_frames.mesh import GeometryError, load  # noqa: E402
+from ufl_frames.mesh.meshing import AUTO_TRIANGLES  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 COMM = MPI.COMM_WORLD
@@ -80,7 +81,7 @@ def all_boundary_rows(domain, V):
 
 
 def test_disc_with_centre_points(tmp_path):
-    domain = geometry.load(COMM, write(tmp_path, "disc.geo", DISC), mesh_size=0.1)
+    domain = load(COMM, write(tmp_path, "disc.geo", DISC), mesh_size=0.1)
     assert area(domain) == pytest.approx(math.pi, rel=5e-3)
     assert domain.euler_characteristic == 1 and domain.corners == ()
     assert any("no triangle uses" in note for note in domain.notes)
@@ -96,7 +97,7 @@ def test_disc_with_centre_points(tmp_path):
 
 def test_disc_with_holes_and_centre_points(tmp_path):
     holes = [(0.4, 0.0, 0.15), (-0.3, 0.35, 0.1), (-0.2, -0.45, 0.2)]
-    domain = geometry.load(COMM, write(tmp_path, "holes.geo", disc_with_holes(holes)), 0.08)
+    domain = load(COMM, write(tmp_path, "holes.geo", disc_with_holes(holes)), 0.08)
     exact = math.pi * (1 - sum(r * r for *_, r in holes))
     assert area(domain) == pytest.approx(exact, rel=1e-2)
     assert domain.euler_characteristic == 1 - len(holes)
@@ -106,7 +107,7 @@ def test_disc_with_holes_and_centre_points(tmp_path):
 
 def test_small_holes_get_enough_boundary_points(tmp_path):
     """A hole far below the mesh size is still meshed with ≥ 12 points per turn."""
-    domain = geometry.load(
+    domain = load(
         COMM, write(tmp_path, "tiny.geo", disc_with_holes([(0.3, 0.2, 0.01)])), 0.2
     )
     V = energy.frame_space(domain.mesh)
@@ -127,7 +128,7 @@ Point{101} In Surface{1};          // an embedded point: a mesh vertex, kept
 Point(102) = {3, 3, 0}; Point(103) = {4, 3, 0};
 Line(200) = {102, 103};            // a free curve
 """
-    domain = geometry.load(COMM, write(tmp_path, "stray.geo", text), 0.25)
+    domain = load(COMM, write(tmp_path, "stray.geo", text), 0.25)
     assert area(domain) == pytest.approx(2.0, rel=1e-12)
     x = np.concatenate(COMM.allgather(domain.mesh.geometry.x[:, :2]))
     assert x.max() <= 2 + 1e-12  # nothing of the stray point and curve
@@ -142,7 +143,7 @@ Line(5) = {2, 3}; Line(6) = {3, 4}; Line(7) = {4, 5};
 Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};
 Curve Loop(2) = {5, 6, 7, -2}; Plane Surface(2) = {2};
 """
-    domain = geometry.load(COMM, write(tmp_path, "two.geo", text), 0.2)
+    domain = load(COMM, write(tmp_path, "two.geo", text), 0.2)
     assert area(domain) == pytest.approx(2.0, rel=1e-12)
     assert domain.euler_characteristic == 1
     assert 2 not in domain.boundary_curves  # the shared curve is interior
@@ -155,7 +156,7 @@ def test_overlapping_opencascade_faces_are_fragmented(tmp_path):
 Rectangle(1) = {0, 0, 0, 2, 1};
 Rectangle(2) = {1, 0.5, 0, 2, 1};
 """
-    domain = geometry.load(COMM, write(tmp_path, "overlap.geo", text), 0.2)
+    domain = load(COMM, write(tmp_path, "overlap.geo", text), 0.2)
     assert area(domain) == pytest.approx(2 + 2 - 0.5, rel=1e-12)  # the union
     assert any("fragmented" in note for note in domain.notes)
     assert domain.euler_characteristic == 1
@@ -175,7 +176,7 @@ Line(5) = {5, 6}; Line(6) = {6, 7}; Line(7) = {7, 8}; Line(8) = {8, 5};
 Curve Loop(2) = {5, 6, 7, 8}; Plane Surface(2) = {2};
 """
     with pytest.raises(GeometryError, match="inside the domain") as info:
-        geometry.load(COMM, write(tmp_path, "touch.geo", text), 0.1)
+        load(COMM, write(tmp_path, "touch.geo", text), 0.1)
     assert "\n" not in str(info.value)
 
 
@@ -193,7 +194,7 @@ Curve Loop(2) = {5, 6, 7, 8}; Plane Surface(2) = {2};
 )
 def test_quad_and_order_requests_are_overridden(tmp_path, request_line):
     text = f'SetFactory("OpenCASCADE");\nRectangle(1) = {{0, 0, 0, 2, 1}};\n{request_line}\n'
-    domain = geometry.load(COMM, write(tmp_path, "quads.geo", text), 0.25)
+    domain = load(COMM, write(tmp_path, "quads.geo", text), 0.25)
     assert domain.mesh.topology.cell_type == dolfinx.mesh.CellType.triangle
     assert domain.mesh.geometry.cmaps[0].degree == 1
     assert area(domain) == pytest.approx(2.0, rel=1e-12)
@@ -223,7 +224,7 @@ def test_msh_with_quadrilaterals_is_split(tmp_path):
         gmsh.model.mesh.setRecombine(2, 1)
         gmsh.model.mesh.generate(2)
 
-    domain = geometry.load(COMM, gmsh_write(tmp_path / "quads.msh", build))
+    domain = load(COMM, gmsh_write(tmp_path / "quads.msh", build))
     assert area(domain) == pytest.approx(2.0, rel=1e-12)
     assert any("quadrilaterals split" in note for note in domain.notes)
 
@@ -239,7 +240,7 @@ def test_second_order_msh_keeps_every_node(tmp_path):
         gmsh.model.mesh.setOrder(2)
         counts["nodes"] = gmsh.model.mesh.getNodes()[0].size
 
-    domain = geometry.load(COMM, gmsh_write(tmp_path / "p2.msh", build))
+    domain = load(COMM, gmsh_write(tmp_path / "p2.msh", build))
     nodes = COMM.bcast(counts.get("nodes"), root=0)
     assert domain.num_vertices == nodes
     assert any("second-order triangles split" in note for note in domain.notes)
@@ -257,10 +258,10 @@ def test_default_size_is_relative_to_the_shape(tmp_path, unit):
     text = (f'SetFactory("OpenCASCADE");\nRectangle(1) = {{0, 0, 0, {w}, {h}}};\n'
             f"Disk(2) = {{{w / 2}, {h / 2}, 0, {r}}};\n"
             "BooleanDifference{ Surface{1}; Delete; }{ Surface{2}; Delete; }\n")
-    domain = geometry.load(COMM, write(tmp_path, "plate.geo", text))
+    domain = load(COMM, write(tmp_path, "plate.geo", text))
     cells = domain.num_cells
-    assert 0.5 * geometry.AUTO_TRIANGLES < cells < 2 * geometry.AUTO_TRIANGLES
-    reference = geometry.load(COMM, write(tmp_path, "plate.geo", text.replace(
+    assert 0.5 * AUTO_TRIANGLES < cells < 2 * AUTO_TRIANGLES
+    reference = load(COMM, write(tmp_path, "plate.geo", text.replace(
         f"{w}, {h}", "65, 120").replace(f"{w / 2}, {h / 2}, 0, {r}", "32.5, 60, 0, 10")))
     assert abs(cells - reference.num_cells) <= 0.02 * cells
     assert domain.mesh_size / unit == pytest.approx(reference.mesh_size, rel=0.02)
@@ -273,23 +274,23 @@ Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 1};
 Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};
 """
     path = write(tmp_path, "sized.geo", text)
-    own = geometry.load(COMM, path)
+    own = load(COMM, path)
     assert own.requested_mesh_size is None  # the file's sizes
     assert own.mesh_size == pytest.approx(0.1, rel=0.15)
-    finer = geometry.load(COMM, path, size_factor=0.5)
+    finer = load(COMM, path, size_factor=0.5)
     assert 3.0 < finer.num_cells / own.num_cells < 5.0
-    capped = geometry.load(COMM, path, mesh_size=0.05)  # an explicit size caps
+    capped = load(COMM, path, mesh_size=0.05)  # an explicit size caps
     assert capped.num_cells > 3 * own.num_cells
-    assert geometry.load(COMM, path, mesh_size=0.2).num_cells == own.num_cells  # finer kept
+    assert load(COMM, path, mesh_size=0.2).num_cells == own.num_cells  # finer kept
 
 
 def test_too_many_triangles_refused_before_meshing(tmp_path):
     text = 'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n'
     with pytest.raises(GeometryError, match="about .* triangles") as info:
-        geometry.load(COMM, write(tmp_path, "sq.geo", text), mesh_size=1e-5)
+        load(COMM, write(tmp_path, "sq.geo", text), mesh_size=1e-5)
     assert "\n" not in str(info.value)
     with pytest.raises(GeometryError, match="limit 100"):
-        geometry.load(COMM, write(tmp_path, "sq.geo", text), mesh_size=0.05, max_triangles=100)
+        load(COMM, write(tmp_path, "sq.geo", text), mesh_size=0.05, max_triangles=100)
 
 
 # --- Poincaré–Hopf on every test geometry --------------------------------------------
@@ -341,9 +342,9 @@ def test_poincare_hopf_on_test_geometries(tmp_path, name):
     """
     text, h, chi, expected = SHAPES[name]
     if text is None:
-        domain = geometry.build(COMM, name, h)
+        domain = ufl_frames.mesh.build(COMM, name, h)
     else:
-        domain = geometry.load(COMM, write(tmp_path, f"{name.replace(' ', '_')}.geo", text), h)
+        domain = load(COMM, write(tmp_path, f"{name.replace(' ', '_')}.geo", text), h)
     assert domain.euler_characteristic == chi
     angles = [c.angle for c in domain.corners]
     assert singularities.poincare_hopf_sum(chi, angles) == expected

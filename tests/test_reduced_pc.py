@@ -10,8 +10,9 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import geometry, solvers
+from ufl_frames import solvers
 from ufl_frames.bootstrap import options_scope
+from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import GaussNewtonModel, ReducedFactorPC
 
@@ -20,7 +21,7 @@ COMM = MPI.COMM_WORLD
 
 @pytest.fixture(scope="module")
 def piano():
-    return geometry.build(COMM, "piano", mesh_size=0.1)
+    return build(COMM, "piano", mesh_size=0.1)
 
 
 def mbo_problem(domain, isotropic):
@@ -140,7 +141,7 @@ def test_every_newton_type_solves_with_the_reduced_pc(tao_type):
     """Each Newton TAO type converges with the default preconditioner, under an options
     prefix. ``bntr`` applies the options again inside its solve, which gives the PC a new
     context; that context finds the model (before: PETSc error 101 at its first step)."""
-    field = FrameField.initial(geometry.build(COMM, "annulus", mesh_size=0.1), isotropic=True)
+    field = FrameField.initial(build(COMM, "annulus", mesh_size=0.1), isotropic=True)
     with options_scope([(f"reduced_{tao_type}_tao_type", tao_type)]):
         result = field.solve(max_it=100, options_prefix=f"reduced_{tao_type}_")
     assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
@@ -205,7 +206,7 @@ def test_block_low_rank_factorisation_takes_the_full_rank_steps():
     defaults = newton_pc_options("nls", COMM)
     assert defaults["tao_nls_reduced_mat_mumps_icntl_35"] == "1"
     assert float(defaults["tao_nls_reduced_mat_mumps_cntl_7"]) == MUMPS_BLR_TOLERANCE
-    domain = geometry.build(COMM, "piano", mesh_size=0.05)
+    domain = build(COMM, "piano", mesh_size=0.05)
     runs = []
     for options in ({}, {"tao_nls_reduced_mat_mumps_icntl_35": "0"}):
         with options_scope(options.items()):

@@ -46,10 +46,11 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from ufl_frames import geometry, solvers
+from ufl_frames import solvers
 from ufl_frames.bootstrap import petsc_defaults
 from ufl_frames.fem import energy
 from ufl_frames.frames2d import odeco
+from ufl_frames.mesh import build, piano
 from ufl_frames.solvers import mbo
 
 COMM = MPI.COMM_WORLD
@@ -167,7 +168,7 @@ def moved(problem, x, s, w):
 
 @pytest.fixture(scope="module")
 def _annulus_solve():
-    mesh = geometry.build(COMM, "annulus", 0.1).mesh
+    mesh = build(COMM, "annulus", 0.1).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solvers.frame_problem(q, isotropic=True)
     result = solvers.solve(problem, max_it=60, options_prefix="second_order_")
@@ -191,7 +192,7 @@ def annulus_solution(_annulus_solve):
 )
 def test_riemannian_gradient_matches_central_differences(name, isotropic):
     """g·d = d/dε H(R(x + εd)) on the MBO field (the piano: with pinned singular triangles)."""
-    mesh = geometry.build(COMM, name, 0.2).mesh
+    mesh = build(COMM, name, 0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solvers.frame_problem(
         q, isotropic=isotropic, pin_singularities=True, max_aspect=None if isotropic else 4.0
@@ -436,7 +437,7 @@ def test_exact_hessian_is_the_riemannian_hessian_at_a_critical_point():
     The pinned isotropic piano is a large-residual minimum (H ≈ 0.14 at h = 0.2) where the
     Gauss–Newton part alone is visibly off — checked too."""
     comm = MPI.COMM_WORLD
-    mesh = geometry.piano(comm, mesh_size=0.2).mesh
+    mesh = piano(comm, mesh_size=0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solvers.frame_problem(q, isotropic=True, pin_singularities=True)
     with petsc_defaults("crit_", {"tao_gttol": 1e-11, "tao_nls_ksp_rtol": 1e-12}):

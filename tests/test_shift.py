@@ -45,9 +45,10 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import geometry, solvers
+from ufl_frames import solvers
 from ufl_frames.bootstrap import petsc_defaults
 from ufl_frames.fem import energy
+from ufl_frames.mesh import annulus
 from ufl_frames.solvers import mbo
 from ufl_frames.solvers.tao import tao_callbacks
 
@@ -57,7 +58,7 @@ RTOL = 1e-11  # round-off of a few sparse products against |B| ~ μ
 
 @pytest.fixture(scope="module")
 def _field():
-    mesh = geometry.annulus(COMM, 0.2).mesh
+    mesh = annulus(COMM, 0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     return q, q.x.array.copy()
 
@@ -252,7 +253,7 @@ def test_tao_perturbed_newton_step(tao_type):
     iteration on), CG to 1e-12 with Jacobi on the (shifted) pre-matrix and a unit step
     (``-tao_ls_type unit``): x₁ − x₀ is the Newton direction TAO computed.
     """
-    mesh = geometry.annulus(COMM, 0.2).mesh
+    mesh = annulus(COMM, 0.2).mesh
     q = mbo.mbo_frame_field(energy.frame_space(mesh))
     problem = solvers.frame_problem(q, max_aspect=4.0)
     probe, x0, _ = model_at(problem, exact=False)

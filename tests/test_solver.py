@@ -36,7 +36,7 @@ from ufl_frames.solvers import mbo
 
 def mbo_problem(annulus_mesh, h, isotropic, comm=MPI.COMM_WORLD, mbo_prefix="mbo_"):
     mesh = annulus_mesh(h, comm)
-    mesh = getattr(mesh, "mesh", mesh)  # a mesh, or a geometry.Domain holding one
+    mesh = getattr(mesh, "mesh", mesh)  # a mesh, or a Domain holding one
     q = mbo.mbo_frame_field(energy.frame_space(mesh), options_prefix=mbo_prefix)
     return solvers.frame_problem(q, isotropic=isotropic)
 
@@ -265,12 +265,12 @@ def polygon_geo(points) -> str:
 
 
 def polygon_mbo_field(directory, name, points, h, comm=MPI.COMM_WORLD):
-    """MBO field on the polygon, meshed by :func:`geometry.load` (rank 0 reads the file)."""
-    from ufl_frames import geometry
+    """MBO field on the polygon, meshed by :func:`ufl_frames.mesh.load` (rank 0 reads the file)."""
+    from ufl_frames.mesh import load
 
     path = directory / f"{name}.geo"
     path.write_text(polygon_geo(points))
-    loaded = geometry.load(comm, path, h)
+    loaded = load(comm, path, h)
     mesh = getattr(loaded, "mesh", loaded)  # a mesh, or a Domain holding one
     return mbo.mbo_frame_field(energy.frame_space(mesh))
 

@@ -4,7 +4,7 @@
 * :mod:`ufl_frames.fem`: the P1 space, UFL energies, constraints and the frame
   manifold (DOLFINx);
 * :mod:`ufl_frames.solvers`: the MBO initial field and the TAO minimisation;
-* :mod:`ufl_frames.geometry`, :mod:`ufl_frames.pipeline` (``FrameField``),
+* :mod:`ufl_frames.mesh`, :mod:`ufl_frames.pipeline` (``FrameField``),
   :mod:`ufl_frames.io`, :mod:`ufl_frames.cli`: meshing, the whole run, files, commands.
 
 Everything outside ``frames2d`` needs DOLFINx; import :mod:`ufl_frames.bootstrap` first

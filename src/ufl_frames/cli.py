@@ -9,7 +9,7 @@
     ufl-frames --version
 
 GEOMETRY is ``annulus``, ``piano`` or a ``.geo``/``.msh``/``.step``/``.brep`` file
-(:func:`ufl_frames.geometry.build`). The run is: mesh → MBO initial field
+(:func:`ufl_frames.mesh.build`). The run is: mesh → MBO initial field
 (:mod:`ufl_frames.solvers.mbo`) → TAO minimisation of H (:mod:`ufl_frames.solvers`) →
 singularities → results in DIR (default ``out_<geometry stem>``):
 
@@ -67,7 +67,7 @@ from ufl_frames.interrupts import INTERRUPTED_STATUS, Interrupted
 from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
 
 PROG = "ufl-frames"
-DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.geometry.load
+DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.mesh.load
 DEFAULT_MAX_IT = 500
 #: Under MPI, seconds a rank that failed waits for the others to fail too (an error
 #: every rank meets) before it aborts the job (an error of its own).
@@ -476,14 +476,14 @@ def run_solve(
     summary (all ranks).
 
     Collective over ``comm`` (default ``MPI.COMM_WORLD``). Raises :class:`InputError`
-    (for a :class:`ufl_frames.geometry.GeometryError`, a bad parameter or PETSc option in
+    (for a :class:`ufl_frames.mesh.GeometryError`, a bad parameter or PETSc option in
     the database, an existing non-empty ``out``) on every rank, before anything is
     computed or written, when the input is unusable; ``levels`` > 1: nested iteration
     (:meth:`~ufl_frames.pipeline.FrameField.nested`) over meshes of size factors
     2^(levels-1) … 1 of ``size_factor`` ('auto': :func:`auto_levels` of the requested
     mesh, one level for a ``.msh`` or ``conformal``; a coarse mesh that fails or loses a
     hole ends the coarsening there; with ``nested_meshes`` the levels of
-    :func:`ufl_frames.geometry.build_nested` instead, one level fewer where its coarsest
+    :func:`ufl_frames.mesh.build_nested` instead, one level fewer where its coarsest
     fails or loses a hole); :class:`RunError` when a solve or
     writing the results fails on every rank alike (a PETSc error, a full disk); other
     exceptions are bugs and keep their type. ``out`` is written whole or not at all
@@ -496,7 +496,7 @@ def run_solve(
     from petsc4py import PETSc
 
     from ufl_frames import checkpoint as checkpoints
-    from ufl_frames import geometry as geometry_module
+    from ufl_frames.mesh import GeometryError, MeshTimeLimit, build
 
     comm = MPI.COMM_WORLD if comm is None else comm
     say = _printer(comm, quiet)
@@ -534,10 +534,10 @@ def run_solve(
     limit["time_limit"] = mesh_time_limit
     interrupts.set_stage("meshing")
     try:
-        domain = geometry_module.build(comm, geometry, mesh_size, size_factor, **limit)
-    except geometry_module.MeshTimeLimit as e:  # raised identically on every rank
+        domain = build(comm, geometry, mesh_size, size_factor, **limit)
+    except MeshTimeLimit as e:  # raised identically on every rank
         raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
-    except geometry_module.GeometryError as e:  # raised identically on every rank
+    except GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
     automatic = levels == "auto"
     if automatic:
@@ -551,10 +551,9 @@ def run_solve(
         for k in range(levels - 1, 0, -1):
             say(f"meshing level {levels - 1 - k} (size factor {2**k:g}) ...")
             try:
-                level = geometry_module.build(comm, geometry, mesh_size, size_factor * 2**k,
-                                              **limit)
+                level = build(comm, geometry, mesh_size, size_factor * 2**k, **limit)
                 _check_same_topology(level, domain, 2**k)
-            except geometry_module.GeometryError as e:
+            except GeometryError as e:
                 if not automatic:
                     raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
                 say(f"  note: no coarser level: {e}")
@@ -597,7 +596,7 @@ _OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info
 
 def _check_same_topology(level, domain, factor) -> None:
     """A coarse level of nested iteration must keep the domain's holes and thin parts."""
-    from ufl_frames.geometry import GeometryError
+    from ufl_frames.mesh import GeometryError
 
     if level.euler_characteristic != domain.euler_characteristic:
         raise GeometryError(f"at size factor {factor:g} the mesh has Euler characteristic "
@@ -607,20 +606,19 @@ def _check_same_topology(level, domain, factor) -> None:
 
 def _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor, limit, automatic,
                    say):
-    """(coarser levels, finest) of :func:`ufl_frames.geometry.build_nested` for ``--levels``
+    """(coarser levels, finest) of :func:`ufl_frames.mesh.build_nested` for ``--levels``
     with ``--nested-meshes``; ``domain`` (the mesh at the requested size) where there is one
     level only. ``automatic``: a coarsest mesh that fails or loses a hole means one level
     fewer, not an :class:`InputError`."""
-    from ufl_frames import geometry as geometry_module
+    from ufl_frames.mesh import GeometryError, build_nested
 
     while levels > 1:
         say(f"meshing {levels} nested levels (the coarsest at size factor "
             f"{2**(levels - 1):g}, split {levels - 1} time(s)) ...")
         try:
-            hierarchy = geometry_module.build_nested(comm, geometry, levels, mesh_size,
-                                                     size_factor, **limit)
+            hierarchy = build_nested(comm, geometry, levels, mesh_size, size_factor, **limit)
             _check_same_topology(hierarchy[0], domain, 2**(levels - 1))
-        except geometry_module.GeometryError as e:
+        except GeometryError as e:
             if not automatic:
                 raise InputError(f"--levels {levels} --nested-meshes: {e}") from e
             say(f"  note: {e}: one level fewer")
@@ -633,10 +631,10 @@ def _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor, limit
 def _run_record(geometry: str, comm, **arguments) -> dict:
     """The arguments that decide a run's result, for its checkpoint (collective): the
     geometry by name or by the SHA-256 of its file, the PETSc options but for monitors."""
-    from ufl_frames import geometry as geometry_module
+    from ufl_frames.mesh import KNOWN_GEOMETRIES
 
     identity = None
-    if geometry in geometry_module.KNOWN_GEOMETRIES:
+    if geometry in KNOWN_GEOMETRIES:
         identity = geometry
     elif comm.rank == 0:
         try:

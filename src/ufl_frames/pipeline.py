@@ -2,7 +2,7 @@
 
 ::
 
-    domain = geometry.build(comm, "piano")                    # Domain: mesh, curves, corners
+    domain = mesh.build(comm, "piano")                        # Domain: mesh, curves, corners
     field = FrameField.initial(domain, isotropic=False)       # the smooth MBO cross field
     field.solve(max_it=500)                                   # TAO on the frame manifold
     field.singularities, field.index_theorem()                # indices, Poincaré–Hopf
@@ -30,7 +30,7 @@ from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
 from ufl_frames.frames2d import singularities  # noqa: E402
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT, aspect_bound  # noqa: E402
-from ufl_frames.geometry import Domain  # noqa: E402
+from ufl_frames.mesh import Domain  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
 
 __all__ = ["FrameField"]
@@ -41,7 +41,7 @@ TRIANGLES_PER_QUAD = 8
 
 @dataclass
 class FrameField:
-    """A frame field on a :class:`~ufl_frames.geometry.Domain`, and what was done to it.
+    """A frame field on a :class:`~ufl_frames.mesh.Domain`, and what was done to it.
 
     ``q`` is the P1 field (5 coefficients per vertex); ``boundary_angles`` the exact
     boundary cross angles of the CAD model per local row (None without one);

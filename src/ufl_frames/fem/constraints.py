@@ -95,7 +95,7 @@ def frame_constraints(
 
     The cross at a boundary vertex is aligned with the mesh's boundary edges (module
     docstring), or, where ``boundary_angles`` (one angle per local row, NaN where
-    unknown; e.g. :meth:`ufl_frames.geometry.Domain.boundary_angles`) gives one, with
+    unknown; e.g. :meth:`ufl_frames.mesh.Domain.boundary_angles`) gives one, with
     the CAD curve's exact tangent.
     """
     mesh = V.mesh

@@ -13,7 +13,7 @@ Between independent meshes the result is not the coarse function: fine triangles
 straddle a coarse edge mix the jump of its gradient there, and the integrability energy
 of the transferred field rises in bands along the coarse mesh's rows (7.7x the coarse H
 on the piano from 6.3·10³ to 2.5·10⁴ triangles). On nested meshes
-(:func:`ufl_frames.geometry.build_nested`) the interpolation is exact.
+(:func:`ufl_frames.mesh.build_nested`) the interpolation is exact.
 """
 
 from ufl_frames.bootstrap import init_petsc

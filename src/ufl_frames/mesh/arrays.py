@@ -1,0 +1,282 @@
+"""From the Gmsh mesh of the current model to checked arrays, corners and CAD directions.
+
+Rank 0 turns the Gmsh mesh into a :class:`MeshArrays`: the nodes the triangles use,
+counter-clockwise P1 triangles (second-order ones split into four, quadrilaterals into
+two), the boundary edges with the curve each lies on and every edge once; planarity,
+degenerate triangles, overlaps and slits are refused with a
+:class:`~ufl_frames.mesh.domain.GeometryError`. The boundary's corners and the cross
+angles of the CAD curves' tangents come from the same arrays.
+"""
+
+import math
+from dataclasses import dataclass
+
+import gmsh
+import numpy as np
+
+from ufl_frames.mesh.domain import NO_CURVE, Corner, GeometryError, lookup
+
+
+def surfaces() -> list[int]:
+    """Tags of the current Gmsh model's surfaces."""
+    return [tag for _, tag in gmsh.model.getEntities(2)]
+
+
+def signed_areas(x: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    e1 = x[cells[:, 1]] - x[cells[:, 0]]
+    e2 = x[cells[:, 2]] - x[cells[:, 0]]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def _split_quads(quads: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Two triangles per quadrilateral (corners in cyclic order), cut along the shorter
+    diagonal."""
+    d02 = np.linalg.norm(x[quads[:, 2]] - x[quads[:, 0]], axis=1)
+    d13 = np.linalg.norm(x[quads[:, 3]] - x[quads[:, 1]], axis=1)
+    along02 = (d02 <= d13)[:, None]
+    first = np.where(along02, quads[:, [0, 1, 2]], quads[:, [0, 1, 3]])
+    second = np.where(along02, quads[:, [0, 2, 3]], quads[:, [1, 2, 3]])
+    return np.concatenate([first, second])
+
+
+# Gmsh's 6-node triangle: corners 0, 1, 2, then the midpoints of 01, 12, 20.
+_P2_SPLIT = np.array([[0, 3, 5], [3, 1, 4], [5, 4, 2], [3, 4, 5]])
+
+
+def triangles_of_model(notes: list[str] | None = None):
+    """(xyz of all nodes, triangles as node rows, edges of the 1D elements with their
+    curve tags) of the current Gmsh mesh; higher orders and quadrilaterals converted."""
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    xyz = coords.reshape(-1, 3)
+    row = np.full(int(tags.max(initial=0)) + 1, -1, dtype=np.int64)
+    row[tags.astype(np.int64)] = np.arange(tags.size)
+    pieces, converted = [], {}
+    for _, surface in gmsh.model.getEntities(2):
+        types, _, nodes = gmsh.model.mesh.getElements(2, surface)
+        for kind, element_nodes in zip(types, nodes, strict=True):
+            name, _, order, count, _, corners = gmsh.model.mesh.getElementProperties(kind)
+            e = row[element_nodes.astype(np.int64)].reshape(-1, count)
+            if corners == 3 and count == 6:
+                pieces.append(e[:, _P2_SPLIT].reshape(-1, 3))
+                what = "second-order triangles split into 4 linear triangles each (all nodes kept)"
+            elif corners == 3:
+                pieces.append(e[:, :3])
+                what = None if order == 1 else f"{name} reduced to their corner nodes"
+            elif corners == 4:
+                pieces.append(_split_quads(e[:, :4], xyz))
+                what = "quadrilaterals split into 2 triangles each"
+                if order > 1:
+                    what += " (higher-order nodes dropped)"
+            else:
+                raise GeometryError(f"unsupported 2D element type {name!r}")
+            if what:
+                converted[what] = converted.get(what, 0) + e.shape[0]
+    if notes is not None:
+        notes.extend(f"{n} {what}" for what, n in converted.items())
+    cells = np.concatenate(pieces) if pieces else np.zeros((0, 3), dtype=np.int64)
+    edges, edge_curve = [], []
+    for _, curve in gmsh.model.getEntities(1):
+        types, _, nodes = gmsh.model.mesh.getElements(1, curve)
+        for kind, element_nodes in zip(types, nodes, strict=True):
+            count = gmsh.model.mesh.getElementProperties(kind)[3]
+            e = row[element_nodes.astype(np.int64)].reshape(-1, count)
+            # A 3-node line is two edges through its midpoint (node 2), as the P2 split.
+            pairs = e if count == 2 else np.concatenate([e[:, [0, 2]], e[:, [2, 1]]])
+            edges.append(pairs[:, :2])
+            edge_curve.append(np.full(pairs.shape[0], curve, dtype=np.int64))
+    edges = np.concatenate(edges) if edges else np.zeros((0, 2), dtype=np.int64)
+    curves = np.concatenate(edge_curve) if edge_curve else np.zeros(0, dtype=np.int64)
+    return xyz, cells, edges, curves, tags
+
+
+def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
+    lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+    return lo * n + hi
+
+
+@dataclass
+class MeshArrays:
+    """The mesh on rank 0 as arrays (compressed to the nodes the triangles use)."""
+
+    x: np.ndarray  # (n, 2)
+    cells: np.ndarray  # (m, 3), counter-clockwise
+    boundary: np.ndarray  # (k, 2) boundary edges, domain on their left
+    boundary_curve: np.ndarray  # (k,) curve tag of each
+    gmsh_node: np.ndarray  # (n,) Gmsh node tag of each row
+    edges: np.ndarray  # (e, 2) every edge once, (lo, hi)
+
+
+def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
+    """The current Gmsh mesh as checked arrays: used nodes only, planar, valid cells."""
+    if len(surfaces()) > 1:  # touching surfaces of a .msh or of a built-in model
+        gmsh.model.mesh.removeDuplicateNodes()  # (2 s for 10⁶ triangles: not for one surface)
+    xyz, cells, curve_edges, curves, tags = triangles_of_model(notes)
+    if cells.size == 0:
+        raise GeometryError(f"{source!r} produced no triangle cells")
+    used, cells = np.unique(cells, return_inverse=True)
+    cells = cells.reshape(-1, 3)
+    unused = tags.size - used.size
+    if unused:
+        notes.append(f"{unused} nodes that no triangle uses were dropped (centre points, ...)")
+    xyz = xyz[used]
+    if not np.all(np.isfinite(xyz)):
+        raise GeometryError(f"{source!r} has nodes with NaN or infinite coordinates")
+    scale = max(float(np.abs(xyz[:, :2]).max()), 1e-300)
+    z = xyz[:, 2]
+    if float(z.max() - z.min()) > 1e-8 * scale:
+        raise GeometryError(f"{source!r} is not planar in the xy-plane (z varies)")
+    x = np.ascontiguousarray(xyz[:, :2])
+    if np.any((cells[:, 0] == cells[:, 1]) | (cells[:, 1] == cells[:, 2])
+              | (cells[:, 0] == cells[:, 2])):
+        raise GeometryError(f"{source!r} has triangles with a repeated node")
+    area = signed_areas(x, cells)
+    # Degenerate by shape, not by size: graded meshes have tiny good triangles.
+    longest = np.max([np.sum((x[cells[:, i]] - x[cells[:, (i + 1) % 3]]) ** 2, axis=1)
+                      for i in range(3)], axis=0)
+    degenerate = np.abs(area) <= 1e-10 * longest
+    if degenerate.any():
+        raise GeometryError(f"{source!r} has {int(degenerate.sum())} zero-area triangles")
+    cells = np.where((area < 0)[:, None], cells[:, [0, 2, 1]], cells)
+
+    n = x.shape[0]
+    directed = np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]], cells[:, [2, 0]]])
+    keys = _edge_keys(directed, n)
+    unique, first, counts = np.unique(keys, return_index=True, return_counts=True)
+    mesh_edges = np.stack([unique // n, unique % n], axis=1)
+    if np.any(counts > 2):
+        raise GeometryError(
+            f"{source!r}: {int((counts > 2).sum())} edges are shared by more than two "
+            "triangles (overlapping surfaces)"
+        )
+    boundary = directed[first[counts == 1]]
+    # Curve of each boundary edge, from the 1D elements (map their nodes to rows first).
+    new_row = np.full(int(tags.size), -1, dtype=np.int64)
+    new_row[used] = np.arange(used.size)
+    boundary_curve = np.full(boundary.shape[0], NO_CURVE, dtype=np.int64)
+    if curve_edges.size:
+        mapped = new_row[curve_edges]
+        ok = np.all(mapped >= 0, axis=1)
+        curve_keys = _edge_keys(mapped[ok], n)
+        order = np.argsort(curve_keys)
+        curve_keys, curve_of = curve_keys[order], curves[ok][order]
+        found = lookup(curve_keys, curve_of.astype(float), _edge_keys(boundary, n))
+        boundary_curve = np.where(np.isnan(found), NO_CURVE, found).astype(np.int64)
+    _check_conforming(source, x, cells, boundary)
+    return MeshArrays(x=x, cells=cells, boundary=boundary, boundary_curve=boundary_curve,
+                   gmsh_node=tags[used], edges=mesh_edges)
+
+
+def _check_conforming(source: str, x, cells, boundary) -> None:
+    """Refuse boundary edges that lie inside the domain: surfaces that touch or overlap
+    without sharing their nodes (the frame field would see a slit there)."""
+    from scipy.spatial import cKDTree
+
+    a, b = x[boundary[:, 0]], x[boundary[:, 1]]
+    edge = b - a
+    outward = np.stack([edge[:, 1], -edge[:, 0]], axis=1)  # the domain is on the left
+    probe = 0.5 * (a + b) + 1e-3 * outward
+    centres = x[cells].mean(axis=1)
+    k = min(12, cells.shape[0])
+    _, near = cKDTree(centres).query(probe, k=k)
+    near = near.reshape(probe.shape[0], -1)
+    inside = np.zeros(probe.shape[0], dtype=bool)
+    for j in range(near.shape[1]):
+        tri = x[cells[near[:, j]]]  # (k, 3, 2)
+        d = [
+            (tri[:, (i + 1) % 3, 0] - tri[:, i, 0]) * (probe[:, 1] - tri[:, i, 1])
+            - (tri[:, (i + 1) % 3, 1] - tri[:, i, 1]) * (probe[:, 0] - tri[:, i, 0])
+            for i in range(3)
+        ]
+        inside |= (d[0] > 0) & (d[1] > 0) & (d[2] > 0)
+    if inside.any():
+        raise GeometryError(
+            f"{source!r}: {int(inside.sum())} boundary edges lie inside the domain: surfaces "
+            "touch or overlap without sharing nodes (use BooleanFragments or Coherence)"
+        )
+
+
+def interior_angles(x, cells, n) -> np.ndarray:
+    """Sum of the triangle angles at every node (2π inside, the interior angle on ∂Ω)."""
+    total = np.zeros(n)
+    for i in range(3):
+        p, q, r = cells[:, i], cells[:, (i + 1) % 3], cells[:, (i + 2) % 3]
+        u, v = x[q] - x[p], x[r] - x[p]
+        angle = np.arctan2(np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]),
+                           np.einsum("ij,ij->i", u, v))
+        np.add.at(total, p, angle)
+    return total
+
+
+def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
+    """Cross angles ψ at the boundary nodes from the curves' tangents, and the corners.
+
+    At a node inside a curve ψ is the tangent's angle there; at a geometric point the
+    crosses of the curves meeting there are averaged in the 4-fold representation
+    e^{4iψ} and the interior angle is the angle between the curves' outgoing tangents
+    (on the side the mesh says, for reflex corners)."""
+    boundary_nodes = np.unique(arrays.boundary)
+    row_of_tag = {int(arrays.gmsh_node[row]): int(row) for row in boundary_nodes}
+    psi = np.full(arrays.x.shape[0], np.nan)
+    curves = sorted({int(c) for c in arrays.boundary_curve if c != NO_CURVE})
+    for curve in curves:
+        tags, _, param = gmsh.model.mesh.getNodes(1, curve, includeBoundary=False,
+                                                  returnParametricCoord=True)
+        rows = np.array([row_of_tag.get(int(t), -1) for t in tags], dtype=np.int64)
+        if not tags.size or param.size != tags.size:
+            continue
+        d = np.asarray(gmsh.model.getDerivative(1, curve, param)).reshape(-1, 3)
+        ok = (rows >= 0) & (np.hypot(d[:, 0], d[:, 1]) > 0)
+        psi[rows[ok]] = np.arctan2(d[ok, 1], d[ok, 0])
+    corners = []
+    curve_set = set(curves)
+    for _, point in gmsh.model.getEntities(0):
+        tags = gmsh.model.mesh.getNodes(0, point)[0]
+        if tags.size != 1 or int(tags[0]) not in row_of_tag:
+            continue
+        node = row_of_tag[int(tags[0])]
+        xyz = gmsh.model.getValue(0, point, [])
+        outgoing = []
+        for curve in gmsh.model.getAdjacencies(0, point)[0]:
+            if int(curve) not in curve_set:
+                continue
+            lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, int(curve)))
+            for end, sign in ((lo, 1.0), (hi, -1.0)):
+                at = gmsh.model.getValue(1, int(curve), [end])
+                if math.dist(at[:2], xyz[:2]) > 1e-9 * max(1.0, math.hypot(*xyz[:2])):
+                    continue
+                t = gmsh.model.getDerivative(1, int(curve), [end])
+                if math.hypot(t[0], t[1]) > 0:
+                    outgoing.append((sign * t[0], sign * t[1]))
+        if not outgoing:
+            continue
+        z = sum(np.exp(4j * math.atan2(ty, tx)) for tx, ty in outgoing)
+        if abs(z) > 1e-9 * len(outgoing):
+            psi[node] = np.angle(z) / 4
+        if len(outgoing) == 2:
+            (ax, ay), (bx, by) = outgoing
+            theta = math.atan2(abs(ax * by - ay * bx), ax * bx + ay * by)
+            angle = min((theta, 2 * math.pi - theta), key=lambda a: abs(a - mesh_angle[node]))
+            if abs(angle - math.pi) > 1e-6:
+                corners.append(Corner(float(arrays.x[node, 0]), float(arrays.x[node, 1]), angle))
+    return psi, corners
+
+
+def mesh_corners(arrays: MeshArrays, mesh_angle: np.ndarray) -> list[Corner]:
+    """Corners of a bare mesh: boundary nodes whose interior angle is not ~180° (the
+    ones a boundary-aligned cross must turn a quarter at)."""
+    nodes = np.unique(arrays.boundary)
+    turns = np.rint(mesh_angle[nodes] / (math.pi / 2))
+    return [
+        Corner(float(arrays.x[v, 0]), float(arrays.x[v, 1]), float(mesh_angle[v]))
+        for v in nodes[turns != 2]
+    ]
+
+
+def euler_characteristic(arrays: MeshArrays) -> int:
+    """χ = V − E + F of the triangulation (1 for a disc, 1 − holes in general)."""
+    return int(arrays.x.shape[0] - arrays.edges.shape[0] + arrays.cells.shape[0])
+
+
+def mean_edge_length(arrays: MeshArrays) -> float:
+    e = arrays.edges
+    return float(np.linalg.norm(arrays.x[e[:, 1]] - arrays.x[e[:, 0]], axis=1).mean())

@@ -1,0 +1,161 @@
+"""The meshed domain record and what every stage of building one shares.
+
+:class:`Domain` is what the frame-field pipeline receives: the distributed P1 triangle
+mesh, its boundary facets tagged by curve, the corners and the CAD boundary directions.
+:class:`GeometryError` (and :class:`MeshTimeLimit`) is the one-line error of every
+builder; the argument checks here raise it.
+"""
+
+import math
+import numbers
+from dataclasses import dataclass, field
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import dolfinx  # noqa: E402
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+#: Facet tag of boundary edges that lie on no curve of the file (a bare ``.msh``).
+NO_CURVE = 0
+
+
+class GeometryError(ValueError):
+    """A geometry could not be built, read or meshed (one-line message)."""
+
+
+class MeshTimeLimit(GeometryError):
+    """Reading and meshing a geometry file took longer than its time limit."""
+
+
+
+@dataclass(frozen=True)
+class Corner:
+    """A corner of the boundary: position, interior angle (radians) and its quarter
+    turns ``k = round(angle / (π/2))``; a boundary-aligned cross field gets the index
+    (2 − k)/4 from it (a right-angled convex corner: 1/4, a reflex one: −1/4)."""
+
+    x: float
+    y: float
+    angle: float
+
+    @property
+    def quarter_turns(self) -> int:
+        return int(round(self.angle / (math.pi / 2)))
+
+
+@dataclass
+class Domain:
+    """A meshed planar domain: what the frame-field pipeline needs of the geometry.
+
+    ``facet_tags`` marks every boundary facet with the tag of the curve it lies on
+    (the Gmsh curve tag; :data:`NO_CURVE` where the file has no curves).
+    ``corners`` are the boundary's corners (interior angle ≠ 180°, from the CAD
+    curves' tangents where they exist, else from the mesh), the same on every rank.
+    ``mesh_size`` is the mean edge length of the mesh; ``requested_mesh_size`` the
+    size Gmsh was asked for (None: the file's own sizes, or a ``.msh``).
+    ``notes`` lists what the loader changed or dropped, one line each.
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    facet_tags: dolfinx.mesh.MeshTags
+    corners: tuple[Corner, ...]
+    euler_characteristic: int
+    mesh_size: float
+    requested_mesh_size: float | None
+    source: str
+    notes: tuple[str, ...] = ()
+    #: Boundary directions from the CAD model: sorted input node indices and the cross
+    #: angle ψ (a tangent's angle, mod π/2) at each of them.
+    _direction_nodes: np.ndarray = field(default=None, repr=False)
+    _direction_angles: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.mesh.comm
+
+    @property
+    def num_cells(self) -> int:
+        return self.mesh.topology.index_map(2).size_global
+
+    @property
+    def num_vertices(self) -> int:
+        return self.mesh.topology.index_map(0).size_global
+
+    @property
+    def boundary_curves(self) -> list[int]:
+        """Tags of the curves that carry boundary facets (collective: call on all ranks)."""
+        local = np.unique(self.facet_tags.values).tolist()
+        return sorted({int(t) for part in self.comm.allgather(local) for t in part})
+
+    def boundary_angles(self, V) -> np.ndarray | None:
+        """Cross angle ψ (mod π/2) from the CAD curves at every local row of the P1 space
+        ``V`` (NaN where the model gives none); None without a CAD model."""
+        if self._direction_nodes is None:
+            return None
+        geometry = self.mesh.geometry
+        at_node = lookup(self._direction_nodes, self._direction_angles,
+                          np.asarray(geometry.input_global_indices, dtype=np.int64))
+        index_map = V.dofmap.index_map
+        angles = np.full(index_map.size_local + index_map.num_ghosts, np.nan)
+        # P1: the dofs of a cell are its vertices in the order of its geometry nodes.
+        angles[V.dofmap.list.ravel()] = at_node[geometry.dofmaps[0].ravel()]
+        return angles
+
+
+
+def lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """values[keys == w] for each w of ``wanted``; NaN where absent.
+
+    Args:
+        keys: Sorted keys.
+        values: The value of each key.
+        wanted: The keys looked up.
+
+    Returns:
+        A float array of ``wanted``'s shape.
+    """
+    out = np.full(wanted.shape, np.nan)
+    if keys.size:
+        pos = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+        hit = keys[pos] == wanted
+        out[hit] = values[pos[hit]]
+    return out
+
+
+# --- argument checks ---------------------------------------------------------------
+
+
+def is_real(x) -> bool:
+    """Whether ``x`` is a real number (not a bool)."""
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
+
+
+def check_refinements(refinements) -> int:
+    """``refinements`` as an int, or :class:`GeometryError` if it is not one ≥ 0."""
+    if (isinstance(refinements, bool) or not isinstance(refinements, numbers.Integral)
+            or refinements < 0):
+        raise GeometryError(f"refinements must be a non-negative integer, got {refinements!r}")
+    return int(refinements)
+
+
+def check_positive(name: str, value) -> float:
+    """``value`` as a float, or :class:`GeometryError` naming ``name`` if it is not a
+    positive finite number."""
+    if not is_real(value) or not math.isfinite(value) or value <= 0:
+        raise GeometryError(f"{name} must be a positive finite number, got {value!r}")
+    return float(value)
+
+
+def check_mesh_size(mesh_size) -> float:
+    """``mesh_size`` as a float, or :class:`GeometryError` if it is not positive and finite."""
+    return check_positive("mesh_size", mesh_size)
+
+
+def one_line(e: BaseException | str) -> str:
+    """An error's message on one line (its type's name where it has none)."""
+    text = " ".join(str(e).split())
+    return text or type(e).__name__
+

@@ -1,0 +1,292 @@
+"""Geometry files: :func:`load`, and the screening of what it is given.
+
+A Gmsh script ``.geo`` is run, then meshed in 2D; a mesh ``.msh`` is read as it is;
+CAD ``.step``/``.stp``/``.brep`` is imported with OpenCASCADE, then meshed in 2D. What
+real files contain is handled so that the frame field gets a conforming P1 triangle
+mesh of the whole planar domain:
+
+- points no triangle uses (circle centres, spline control points, free curves and
+  points) are dropped;
+- several surfaces form one domain: OpenCASCADE surfaces are fragmented first (shared
+  curves become interior, overlapping faces are split), built-in ones made coherent;
+  surfaces that still touch without sharing nodes are refused;
+- requests for quadrilaterals (``Recombine``, transfinite or quasi-structured quad
+  meshing, subdivision) and for second order are overridden: triangles are what the
+  field needs; quadrilaterals in a ``.msh`` are split into two triangles each;
+- second-order triangles of a ``.msh`` are split into four P1 triangles on their own
+  nodes (curved boundaries keep their nodes); higher orders keep their corners;
+- mesh size: see :func:`load` and :mod:`ufl_frames.mesh.meshing`;
+- a ``.geo`` that would act outside the run (``Exit``, ``SystemCall``, ``Save``, ...:
+  :func:`_check_geo_script`) is refused before Gmsh runs it, and a surface whose
+  boundary curves cross (:func:`~ufl_frames.mesh.meshing.check_crossings`) before it is
+  meshed;
+- reading and meshing run in a child process, stopped after a time limit
+  (:func:`mesh_time_limit`, :class:`~ufl_frames.mesh.domain.MeshTimeLimit`).
+
+The geometry must lie in a plane z = const; volumes and tetrahedra are rejected.
+"""
+
+import contextlib
+import os
+import re
+import sys
+from pathlib import Path
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+import gmsh  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+from ufl_frames.mesh.arrays import surfaces  # noqa: E402
+from ufl_frames.mesh.distribute import create, verbose  # noqa: E402
+from ufl_frames.mesh.domain import (  # noqa: E402
+    Domain,
+    GeometryError,
+    check_mesh_size,
+    check_positive,
+    check_refinements,
+    is_real,
+    one_line,
+)
+from ufl_frames.mesh.meshing import MAX_TRIANGLES, Sizing, check_crossings, mesh_model  # noqa: E402
+
+#: File extensions understood by :func:`load`, lower case.
+GEO_EXTENSIONS = (".geo",)
+MESH_EXTENSIONS = (".msh",)
+CAD_EXTENSIONS = (".step", ".stp", ".brep")
+#: Seconds :func:`load` lets Gmsh read and mesh a file with the default ``max_triangles``
+#: (more in proportion for a larger one, :func:`mesh_time_limit`); then it is stopped.
+MESH_TIME_LIMIT = 300.0
+
+_GMSH_3D_NAMES = {4: "tetrahedra", 5: "hexahedra", 6: "prisms", 7: "pyramids"}
+
+
+def mesh_time_limit(max_triangles: float = MAX_TRIANGLES) -> float:
+    """The default time limit of :func:`load`: :data:`MESH_TIME_LIMIT` seconds, scaled up
+    in proportion above the default ``max_triangles``."""
+    return MESH_TIME_LIMIT * max(1.0, float(max_triangles) / MAX_TRIANGLES)
+
+
+
+def load(
+    comm: MPI.Comm,
+    path,
+    mesh_size: float | None = None,
+    size_factor: float = 1.0,
+    max_triangles: int = MAX_TRIANGLES,
+    time_limit: float | None = None,
+    refinements: int = 0,
+) -> Domain:
+    """Domain from a ``.geo``, ``.msh``, ``.step``/``.stp`` or ``.brep`` file.
+
+    Physical groups in the file are ignored: the domain is all its surfaces. A ``.msh``
+    is taken as it is: sizes do not apply. Boundaries whose curves cross (a curve loop
+    through itself, a hole across the outline), on which Gmsh's meshing never ends, are
+    refused before meshing.
+
+    Args:
+        comm: The communicator the mesh is distributed over (collective); only rank 0
+            reads the file.
+        path: The file.
+        mesh_size: Absolute, in the file's units: caps the element size
+            (``Mesh.MeshSizeMax``, set after a ``.geo`` has run, so it wins over the
+            script's own value; finer point sizes are kept). None: relative to the
+            shape, the file's own sizes (point sizes, size fields, ``Mesh.MeshSizeMax``)
+            where it sets any, else the size that gives about
+            :data:`~ufl_frames.mesh.meshing.AUTO_TRIANGLES` triangles.
+        size_factor: Scales either size (< 1 refines).
+        max_triangles: Sizes that would give more triangles (estimated from the area)
+            are refused before meshing.
+        time_limit: Reading and meshing run in a child process stopped after this many
+            seconds, with :class:`~ufl_frames.mesh.domain.MeshTimeLimit` (default
+            :func:`mesh_time_limit`; ``math.inf``: in this process, no limit).
+        refinements: As for :func:`~ufl_frames.mesh.build` (not for a ``.msh``).
+
+    Returns:
+        The distributed domain.
+
+    Raises:
+        GeometryError: On every rank, with a one-line message.
+    """
+    path = Path(path)
+    h = None if mesh_size is None else check_mesh_size(mesh_size)
+    refinements = check_refinements(refinements)
+    factor = check_positive("size_factor", size_factor)
+    limit = check_positive("max_triangles", max_triangles)
+    seconds = mesh_time_limit(limit) if time_limit is None else time_limit
+    if not (is_real(seconds) and seconds > 0):  # inf allowed: no limit
+        raise GeometryError(f"time_limit must be a positive number of seconds, got {seconds!r}")
+    ext = path.suffix.lower()
+    known = GEO_EXTENSIONS + MESH_EXTENSIONS + CAD_EXTENSIONS
+    if ext not in known:
+        raise GeometryError(
+            f"unsupported geometry file extension {path.suffix!r} for {str(path)!r}: "
+            f"use one of {', '.join(known)}"
+        )
+    source = str(path)
+
+    def make(notes):  # on rank 0 only: the file need not be visible to the other ranks
+        if not path.is_file():
+            raise GeometryError(f"geometry file not found: {source!r}")
+        if ext in MESH_EXTENSIONS:
+            _check_msh_header(path)
+        if ext in GEO_EXTENSIONS:
+            _check_geo_script(path)
+        _merge(path, quiet=ext in CAD_EXTENSIONS)
+        if ext in MESH_EXTENSIONS:
+            if refinements:
+                raise GeometryError(f"{source!r} is a mesh: it cannot be made by refinement")
+            _check_no_3d_mesh(source)
+            if not surfaces():
+                raise GeometryError(f"{source!r} holds no 2D surface mesh")
+            return None
+        if gmsh.model.getEntities(3):
+            raise GeometryError(
+                f"{source!r} defines volumes: only planar 2D geometries are supported"
+            )
+        if not surfaces():
+            raise GeometryError(f"{source!r} defines no 2D surface")
+        check_crossings(source)
+        return mesh_model(Sizing(h, factor, limit, refinements), notes)
+
+    return create(comm, make, source, cad=ext not in MESH_EXTENSIONS, time_limit=seconds)
+
+
+def _check_msh_header(path: Path) -> None:
+    try:
+        with open(path, "rb") as f:
+            head = f.read(64).lstrip()
+    except OSError as e:
+        raise GeometryError(f"cannot read {str(path)!r}: {one_line(e)}") from None
+    if not head.startswith((b"$MeshFormat", b"$NOD", b"$NOE")):
+        raise GeometryError(f"cannot read {str(path)!r}: not a Gmsh mesh (no $MeshFormat header)")
+
+
+#: Comments and strings of a Gmsh script (``//`` to the end of the line, ``/* */``, "...").
+_GEO_NOISE = re.compile(r'//[^\n]*|/\*.*?(?:\*/|\Z)|"(?:[^"\\]|\\.)*"?', re.DOTALL)
+#: Scripts a script runs: ``Include "file"``, and ``Merge "file.geo"``.
+_GEO_INCLUDE = re.compile(r'\b(Include|Merge)\s*"((?:[^"\\]|\\.)*)"')
+_GEO_COMPUTED_INCLUDE = re.compile(r'(?<![.\w])Include\s*(?!["\s])')
+#: Script commands refused (Gmsh 4.15 runs each of them): what each would do.
+_GEO_REFUSED = {
+    "Exit": "would end the program inside Gmsh",
+    "SystemCall": "runs a program",
+    "NonBlockingSystemCall": "runs a program",
+    "System": "runs a program",
+    "OnelabRun": "runs a program",
+    "Save": "writes a file",
+    "Print": "writes a file",
+    "CreateDir": "creates a folder",
+}
+_GEO_COMMAND = re.compile(r"(?<![.\w])(" + "|".join(_GEO_REFUSED) + r")\b")
+_GEO_PRINTF = re.compile(r"(?<![.\w])Printf\s*\(")
+
+
+def _printf_redirect(code: str, start: int) -> bool:
+    """Whether the ``Printf(`` call whose ``(`` ends at ``start`` is followed by ``>``
+    (``> "file"``, ``>> "file"``: written to a file)."""
+    depth, i = 1, start
+    while i < len(code) and depth:
+        depth += {"(": 1, ")": -1}.get(code[i], 0)
+        i += 1
+    return code[i:].lstrip().startswith(">")
+
+
+def _check_geo_script(path: Path, seen: set | None = None) -> None:
+    """Refuse a ``.geo`` (or a script it ``Include``s or ``Merge``s) that would act
+    outside the run: ``Exit`` (Gmsh would end the whole process, with status 0 and
+    nothing done), programs (``SystemCall``, ``System``, ``OnelabRun``...) and files or
+    folders written (``Save``, ``Print``, ``Printf(...) > "file"``, ``CreateDir``); also
+    an ``Include`` of a computed name, which cannot be checked."""
+    seen = set() if seen is None else seen
+    key = path.resolve()
+    if key in seen or len(seen) > 100:
+        return
+    seen.add(key)
+    try:
+        text = path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as e:
+        raise GeometryError(f"cannot read {str(path)!r}: {one_line(e)}") from None
+
+    def blank(m):  # keeps the line numbers
+        kept = "\n" * m.group(0).count("\n")
+        return f'""{kept}' if m.group(0).startswith('"') else f" {kept}"
+
+    code = _GEO_NOISE.sub(blank, text)
+    found = [(m.start(), m.group(1), _GEO_REFUSED[m.group(1)])
+             for m in _GEO_COMMAND.finditer(code)]
+    found += [(m.start(), 'Printf(...) > "file"', "writes a file")
+              for m in _GEO_PRINTF.finditer(code) if _printf_redirect(code, m.end())]
+    found += [(m.start(), "Include with a computed file name", "cannot be checked")
+              for m in _GEO_COMPUTED_INCLUDE.finditer(code)]
+    if found:
+        start, name, what = min(found)
+        line = code.count("\n", 0, start) + 1
+        raise GeometryError(f"{str(path)!r} line {line} calls {name}, which {what}: remove it")
+    no_comments = re.sub(r'//[^\n]*|/\*.*?(?:\*/|\Z)', " ", text, flags=re.DOTALL)
+    for command, name in _GEO_INCLUDE.findall(no_comments):
+        child = path.parent / name
+        if (command == "Include" or child.suffix.lower() in GEO_EXTENSIONS) and child.is_file():
+            _check_geo_script(child, seen)
+
+
+def _merge(path: Path, quiet: bool) -> None:
+    """``gmsh.merge`` that reports the file's errors as :class:`GeometryError`.
+
+    With ``General.AbortOnError`` at its API default (2) Gmsh throws at the first
+    syntax error in a script and leaves the rest of the file in its lexer, which
+    then breaks every later parse in the process. So errors are not thrown here but
+    collected from the logger (a logger started by the caller is stopped).
+    """
+    abort = gmsh.option.getNumber("General.AbortOnError")
+    gmsh.option.setNumber("General.AbortOnError", 0)
+    gmsh.logger.start()
+    try:
+        with _silenced(quiet and not verbose()):
+            gmsh.merge(str(path))
+        errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
+    except Exception as e:
+        errors = [one_line(e)]
+    finally:
+        gmsh.logger.stop()
+        gmsh.option.setNumber("General.AbortOnError", abort)
+    if errors:
+        message = errors[0].removeprefix("Error:").strip()
+        raise GeometryError(f"cannot read {str(path)!r}: {one_line(message)}")
+    if not gmsh.model.getEntities():
+        raise GeometryError(f"cannot read {str(path)!r}: no geometry found in the file")
+
+
+@contextlib.contextmanager
+def _silenced(active: bool):
+    """Send the process's stdout and stderr to /dev/null (OpenCASCADE prints directly)."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+def _check_no_3d_mesh(source: str) -> None:
+    types = set()
+    for _, tag in gmsh.model.getEntities(3):
+        types.update(int(t) for t in gmsh.model.mesh.getElements(3, tag)[0])
+    if types:
+        names = ", ".join(sorted(_GMSH_3D_NAMES.get(t, f"type {t}") for t in types))
+        raise GeometryError(
+            f"{source!r} is a 3D mesh ({names}): only planar triangle meshes are supported"
+        )
+
