@@ -1,7 +1,7 @@
-// The annulus of ufl_frames (ufl_frames.geometry.annulus): r_inner <= |x| <= r_outer,
+// The annulus of ufl_frames (ufl_frames.mesh.annulus): r_inner <= |x| <= r_outer,
 // default 0.5 <= |x| <= 1, area 3 pi / 4. Same construction as the Python builder.
 //
-//   ufl_frames.geometry.load(comm, "meshes/annulus.geo", mesh_size)
+//   ufl_frames.mesh.load(comm, "meshes/annulus.geo", mesh_size)
 //   gmsh meshes/annulus.geo -2          (stand-alone; h below is then the size)
 SetFactory("OpenCASCADE");
 

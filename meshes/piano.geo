@@ -1,9 +1,9 @@
-// The 'piano' of ufl_frames (ufl_frames.geometry.piano): a grand-piano outline
+// The 'piano' of ufl_frames (ufl_frames.mesh.piano): a grand-piano outline
 // whose boundary-aligned cross field has one +1/4 singularity on the left (under
 // the rounded tail) and one -1/4 on the right (beside the concave bentside).
 // See README.md beside this file. Same construction as the Python builder.
 //
-//   ufl-frames / ufl_frames.geometry.load(comm, "meshes/piano.geo", mesh_size)
+//   ufl-frames / ufl_frames.mesh.load(comm, "meshes/piano.geo", mesh_size)
 //   gmsh meshes/piano.geo -2            (stand-alone; h below is then the size)
 SetFactory("OpenCASCADE");
 
