@@ -125,6 +125,7 @@ from ufl_frames.bootstrap import init_petsc  # noqa: E402
 init_petsc(sys.argv[:1] + PETSC_ARGV)
 
 import numpy as np  # noqa: E402
+from _common import table_rule  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import solvers  # noqa: E402
@@ -268,7 +269,7 @@ def table(results, sizes):
         "| case | h | triangles | method | its | f evals | g evals | wall s | cpu s | final H "
         f"| rel grad | reason | sing. | its to {REFERENCE} H | its ratio | wall ratio | cpu ratio |"
     )
-    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    lines = [header, table_rule(header)]
     for (name, h), (cells, runs) in results.items():
         for run in runs:
             lines.append(

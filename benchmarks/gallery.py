@@ -65,19 +65,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import BUILTIN_GEO, GEOMETRY_SUFFIXES, ROOT, gmsh_errors, one_line, surface_elements
 from _processes import last_line, run_in_group
 
-ROOT = Path(__file__).resolve().parent.parent
 GALLERY = ROOT / "meshes" / "gallery"
-BUILTIN = {"annulus": ROOT / "meshes" / "annulus.geo", "piano": ROOT / "meshes" / "piano.geo"}
-GEOMETRY_SUFFIXES = (".geo", ".msh", ".step", ".stp", ".brep")
 
 
 # --- the Gmsh probe (runs in its own process: Gmsh may crash or hang) -----------------
-
-
-def _one_line(text) -> str:
-    return " ".join(str(text).split())
 
 
 def _corner_angles(xy, cells):
@@ -126,26 +120,13 @@ def irregular_vertices(xy, quads, triangles):
 
 def _elements_2d():
     """(coordinates (n, 2), quads, triangles, other element count) of the current model."""
-    import gmsh
-
-    tags, coords, _ = gmsh.model.mesh.getNodes()
-    order = np.argsort(tags)
-    xy = coords.reshape(-1, 3)[:, :2]
-    found = {3: [], 2: []}
-    other = 0
-    for _, surface in gmsh.model.getEntities(2):
-        for etype, _, nodes in zip(*gmsh.model.mesh.getElements(2, surface), strict=True):
-            if int(etype) in found:
-                k = 4 if int(etype) == 3 else 3
-                found[int(etype)].append(np.asarray(nodes, dtype=np.int64).reshape(-1, k))
-            else:
-                other += len(nodes)
+    xyz, surfaces = surface_elements()
     cells = {}
-    for etype, parts in found.items():
-        k = 4 if etype == 3 else 3
-        flat = np.concatenate(parts) if parts else np.zeros((0, k), np.int64)
-        cells[etype] = order[np.searchsorted(tags[order], flat)]
-    return xy, cells[3], cells[2], other
+    for etype, k in ((3, 4), (2, 3)):
+        parts = [found[etype] for found in surfaces if etype in found]
+        cells[etype] = np.concatenate(parts) if parts else np.zeros((0, k), np.int64)
+    other = sum(c.size for found in surfaces for etype, c in found.items() if etype not in cells)
+    return xyz[:, :2], cells[3], cells[2], other
 
 
 def probe(path: Path, mesh_size_factor: float, quad_size_factor: float, quads: bool) -> dict:
@@ -157,15 +138,9 @@ def probe(path: Path, mesh_size_factor: float, quad_size_factor: float, quads: b
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.AbortOnError", 0)
-        gmsh.logger.start()
-        try:
-            gmsh.merge(str(path))
-            errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
-        except Exception as e:  # reported, not raised
-            errors = [str(e)]
-        gmsh.logger.stop()
+        errors = gmsh_errors(lambda: gmsh.merge(str(path)), catch=True)  # reported, not raised
         if errors:
-            result["error"] = "Gmsh cannot read it: " + _one_line(errors[0]).removeprefix("Error: ")
+            result["error"] = "Gmsh cannot read it: " + one_line(errors[0]).removeprefix("Error: ")
             return result
         if not gmsh.model.getEntities():
             result["error"] = "Gmsh found no geometry in the file"
@@ -215,16 +190,10 @@ def _quad_mesh(size: float, factor: float) -> dict:
         gmsh.option.setNumber(option, value)
     gmsh.model.mesh.clear()
     start = time.perf_counter()
-    gmsh.logger.start()
-    try:
-        gmsh.model.mesh.generate(2)
-        errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
-    except Exception as e:  # reported, not raised
-        errors = [str(e)]
-    gmsh.logger.stop()
+    errors = gmsh_errors(lambda: gmsh.model.mesh.generate(2), catch=True)  # reported, not raised
     seconds = time.perf_counter() - start
     if errors:
-        message = _one_line(errors[0]).removeprefix("Error: ")
+        message = one_line(errors[0]).removeprefix("Error: ")
         return {"error": f"Gmsh algorithm 11 failed: {message}", "seconds": seconds}
     xy, quads, triangles, other = _elements_2d()
     interior, boundary = irregular_vertices(xy, quads, triangles)
@@ -427,7 +396,7 @@ def format_quad(shape: dict) -> str:
 
 def gallery_shapes() -> dict[str, Path]:
     files = sorted(p for p in GALLERY.iterdir() if p.suffix.lower() in GEOMETRY_SUFFIXES)
-    return {**{p.stem: p for p in files}, **BUILTIN}
+    return {**{p.stem: p for p in files}, **BUILTIN_GEO}
 
 
 def resolve(names: list[str] | None) -> list[tuple[str, Path, str]]:
@@ -435,8 +404,8 @@ def resolve(names: list[str] | None) -> list[tuple[str, Path, str]]:
     known = gallery_shapes()
     chosen = []
     for name in names or list(known):
-        if name in BUILTIN:
-            chosen.append((name, BUILTIN[name], name))
+        if name in BUILTIN_GEO:
+            chosen.append((name, BUILTIN_GEO[name], name))
         elif name in known:
             chosen.append((name, known[name], str(known[name].relative_to(ROOT))))
         elif Path(name).exists():

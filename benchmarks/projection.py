@@ -18,9 +18,9 @@ variants (``mandel``, ``tangent_project``) run with OMP_NUM_THREADS=1 to time on
 """
 
 import argparse
-import time
 
 import numpy as np
+from _common import best_time
 
 from ufl_frames.frames2d import odeco
 
@@ -34,20 +34,6 @@ def near_variety(rng, n, isotropic, noise=1e-3):
     dq = rng.standard_normal(q.shape)
     dq *= noise * np.linalg.norm(q, axis=1, keepdims=True) / np.linalg.norm(dq, axis=1)[:, None]
     return q + dq
-
-
-def best_time(func, repeat):
-    """Best wall-clock and best CPU (process) time over ``repeat`` runs, in seconds.
-
-    CPU time is the fairer number on a shared machine; wall time is the one that counts.
-    """
-    wall, cpu = [], []
-    for _ in range(repeat):
-        start, start_cpu = time.perf_counter(), time.process_time()
-        func()
-        wall.append(time.perf_counter() - start)
-        cpu.append(time.process_time() - start_cpu)
-    return min(wall), min(cpu)
 
 
 def unchunked(func):

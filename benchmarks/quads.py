@@ -60,12 +60,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import BUILTIN_GEO, GEOMETRY_SUFFIXES, ROOT, gmsh_errors, one_line, surface_elements
 from _processes import last_line, run_in_group
 
-ROOT = Path(__file__).resolve().parent.parent
 SHAPES = ROOT / "benchmarks" / "shapes"
-BUILTIN = {"annulus": ROOT / "meshes" / "annulus.geo", "piano": ROOT / "meshes" / "piano.geo"}
-GEOMETRY_SUFFIXES = (".geo", ".msh", ".step", ".stp", ".brep")
 
 #: Gmsh options per method, and the first guess of MeshSizeMax in units of √(area/target).
 GMSH_METHODS = {
@@ -89,10 +87,6 @@ RESCALES = 2
 WITHIN = 0.10
 
 
-def _one_line(text) -> str:
-    return " ".join(str(text).split())
-
-
 # --- one Gmsh run (in a subprocess: --worker) -------------------------------------------
 
 
@@ -101,14 +95,9 @@ def _merge(path: Path) -> None:
     import gmsh
 
     gmsh.option.setNumber("General.AbortOnError", 0)
-    gmsh.logger.start()
-    try:
-        gmsh.merge(str(path))
-        errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
-    finally:
-        gmsh.logger.stop()
+    errors = gmsh_errors(lambda: gmsh.merge(str(path)))
     if errors:
-        raise RuntimeError(_one_line(errors[0]).removeprefix("Error: "))
+        raise RuntimeError(one_line(errors[0]).removeprefix("Error: "))
 
 
 def _cad_area() -> float:
@@ -139,18 +128,12 @@ def _mesh_arrays():
 
     if len(gmsh.model.getEntities(2)) > 1:
         gmsh.model.mesh.removeDuplicateNodes()
-    tags, coords, _ = gmsh.model.mesh.getNodes()
-    xyz = coords.reshape(-1, 3)
-    row = np.full(int(tags.max(initial=0)) + 1, -1, dtype=np.int64)
-    row[tags.astype(np.int64)] = np.arange(tags.size)
+    xyz, surfaces = surface_elements()
     cells = {3: [], 2: []}
-    for _, surface in gmsh.model.getEntities(2):
-        found = {}
-        for kind, _, nodes in zip(*gmsh.model.mesh.getElements(2, surface), strict=True):
-            k = {3: 4, 2: 3}.get(int(kind))
-            if k is None:
-                raise RuntimeError(f"unexpected 2D element type {int(kind)}")
-            found[int(kind)] = row[nodes.astype(np.int64)].reshape(-1, k)
+    for found in surfaces:
+        for kind in found:
+            if kind not in cells:
+                raise RuntimeError(f"unexpected 2D element type {kind}")
         signed = 0.0
         for c in found.values():
             p = xyz[c][:, :, :2]
@@ -209,7 +192,7 @@ def gmsh_run(path: Path, method: str, quads: float, quad_size: float | None,
             finally:
                 gmsh.logger.stop()
             if errors:
-                return {"mesh_size": h, "error": _one_line(errors[0]).removeprefix("Error: ")}
+                return {"mesh_size": h, "error": one_line(errors[0]).removeprefix("Error: ")}
             quads, triangles = _count_quads()
             return {"mesh_size": h, "quads": quads, "triangles": triangles, "seconds": seconds}
 
@@ -344,7 +327,7 @@ def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
             reported = summary["quads"]
         except (OSError, ValueError, KeyError, TypeError) as e:
             return {**row, "status": "not available",
-                    "error": f"no 'quads' in summary.json ({_one_line(e)})"}
+                    "error": f"no 'quads' in summary.json ({one_line(e)})"}
         seconds = reported.get("seconds")
         if isinstance(seconds, dict):  # per step: quantise, extract, ...
             seconds = sum(v for v in seconds.values() if isinstance(v, int | float))
@@ -356,7 +339,7 @@ def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
             return {**row, "quality": {k: v for k, v in reported.items()
                                        if k not in ("valid", "seconds")},
                     "valid": bool(reported.get("valid")),
-                    "problems": [f"quads.msh not measured: {_one_line(e)}"]}
+                    "problems": [f"quads.msh not measured: {one_line(e)}"]}
         quality = quad_quality(x, q)
         problems = check_quad_mesh(x, q, area=area, rtol=args.area_rtol)
         mismatch = sorted(k for k, v in quality.items()
@@ -465,7 +448,7 @@ def print_summary(summary: dict, methods: list[str]) -> None:
 
 
 def resolve(names: list[str] | None) -> list[tuple[str, Path]]:
-    known = {p.stem: p for p in sorted(SHAPES.glob("*.geo"))} | BUILTIN
+    known = {p.stem: p for p in sorted(SHAPES.glob("*.geo"))} | BUILTIN_GEO
     if not names:
         return list(known.items())
     found = []
@@ -520,7 +503,7 @@ def main() -> None:
             row = gmsh_run(Path(path), method, args.quads, args.quad_size, args.out,
                            args.stem, args.area_rtol)
         except Exception as e:  # reported, not raised
-            row = {"method": method, "status": "failed", "error": _one_line(e)}
+            row = {"method": method, "status": "failed", "error": one_line(e)}
         print(json.dumps(row))
         return
 

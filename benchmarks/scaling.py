@@ -48,7 +48,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 CASES = ("piano-noniso", "piano-iso", "annulus-noniso", "annulus-iso")
 #: Triangles at h = 0.05 (measured), for --triangles.
-TRIANGLES_AT_005 = {"piano": 1887, "annulus": 2305}
 STAGES = ("mesh", "mbo", "solve", "write")
 GROWTH_LIMIT = 1.3  # per 2x refinement, Newton iterations and mean Krylov iterations
 #: Final H of the non-isotropic piano at h = 0.05 with the defaults before the scaling work:
@@ -144,11 +143,6 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 # --- the driver ---------------------------------------------------------------------------
 
 
-def mesh_size_for(case: str, triangles: float) -> float:
-    shape = case.split("-")[0]
-    return 0.05 * math.sqrt(TRIANGLES_AT_005[shape] / triangles)
-
-
 def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
     """Run one (case, h) in a fresh process; the record, or its failure."""
     command = [sys.executable, str(Path(__file__).resolve()), "--one", case, repr(h),
@@ -178,9 +172,12 @@ def launch(case, h, ranks, args, petsc_argv, partial: Path) -> dict:
 
 def print_quad_table(records) -> None:
     """The quad stage per run: its sub-stages' seconds and the mesh it made."""
-    print("\n| case | triangles | quads | quantise s | extract s | improve s | quads s "
-          "| µs per triangle | irregular | min SJ | valid |")
-    print("|" + "---|" * 11)
+    from _common import table_rule
+
+    head = ("\n| case | triangles | quads | quantise s | extract s | improve s | quads s "
+            "| µs per triangle | irregular | min SJ | valid |")
+    print(head)
+    print(table_rule(head))
     for r in records:
         q = r.get("quads") if r["status"] == "ok" else None
         if not q:
@@ -202,11 +199,13 @@ def _indices(values) -> str:
 
 
 def print_table(records) -> None:
+    from _common import table_rule
+
     head = ("| case | h | triangles | ranks | mesh s | mbo s | solve s | write s | total s "
             "| Newton its | KSP mean | KSP max | factorisations per step | peak MB/rank "
             "| final H | reason | singularities |")
     print(head)
-    print("|" + "---|" * (head.count("|") - 1))
+    print(table_rule(head))
     for r in records:
         if r["status"] != "ok":
             print(f"| {r['case']} | {r['h']:.4g} | - | {r['ranks']} | {r['status']} "
@@ -358,8 +357,11 @@ def main(argv=None) -> int:
     if args.sizes:
         plan = {case: sorted(args.sizes, reverse=True) for case in args.cases}
     else:
+        from _common import mesh_size_for
+
         counts = sorted(args.triangles or [1e4, 1e5])
-        plan = {case: [mesh_size_for(case, n) for n in counts] for case in args.cases}
+        plan = {case: [mesh_size_for(case.split("-")[0], n) for n in counts]
+                for case in args.cases}
     records = []
     with tempfile.TemporaryDirectory() as tmp:
         for case, hs in plan.items():

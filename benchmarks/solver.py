@@ -97,31 +97,13 @@ import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
 import dolfinx.fem.petsc  # noqa: E402, F401
 import numpy as np  # noqa: E402
+from _common import best_time, mesh_size_for  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
 from ufl_frames import solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.mesh import annulus  # noqa: E402
 from ufl_frames.solvers import mbo  # noqa: E402
-
-#: Triangles of the Gmsh annulus at mesh size 0.05 (triangles ~ 1/h²).
-TRIANGLES_AT_005 = 2305
-
-
-def mesh_size_for(triangles: float) -> float:
-    return 0.05 * math.sqrt(TRIANGLES_AT_005 / triangles)
-
-
-def best_time(comm, func, repeat):
-    """Best over ``repeat`` runs of (wall max over ranks, CPU time of this rank), seconds."""
-    walls, cpus = [], []
-    for _ in range(repeat):
-        comm.Barrier()
-        start, start_cpu = time.perf_counter(), time.process_time()
-        func()
-        cpus.append(time.process_time() - start_cpu)
-        walls.append(comm.allreduce(time.perf_counter() - start, op=MPI.MAX))
-    return min(walls), min(cpus)
 
 
 def peak_rss_mb(comm) -> float:
@@ -159,9 +141,9 @@ def bench_size(comm, h, args):
         q.x.array[:] = q0
         problem.retract()
 
-    t_grad = best_time(comm, gradient_evaluation, args.repeat)
-    t_dir = best_time(comm, dirichlet_assembly, args.repeat)
-    t_retract = best_time(comm, retraction, args.repeat)
+    t_grad = best_time(gradient_evaluation, args.repeat, comm)
+    t_dir = best_time(dirichlet_assembly, args.repeat, comm)
+    t_retract = best_time(retraction, args.repeat, comm)
 
     rss_components = peak_rss_mb(comm)
 
@@ -285,7 +267,7 @@ def refinement_study(comm, args):
 
 def main(args):
     comm = MPI.COMM_WORLD
-    sizes = args.sizes or [mesh_size_for(n) for n in args.triangles]
+    sizes = args.sizes or [mesh_size_for("annulus", n) for n in args.triangles]
     if comm.rank == 0:
         print(
             f"annulus 0.5 <= r <= 1, {comm.size} rank(s), mesh sizes "
