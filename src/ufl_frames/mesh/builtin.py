@@ -154,6 +154,5 @@ def piano_perimeter() -> float:
     return 2 * w + 2 * top - 2 * (r1 + r2) + math.pi / 2 * (r1 + r2)
 
 
-
 #: Built-in geometry names accepted by :func:`build`.
 KNOWN_GEOMETRIES = {"annulus": annulus, "piano": piano}

@@ -30,7 +30,6 @@ class MeshTimeLimit(GeometryError):
     """Reading and meshing a geometry file took longer than its time limit."""
 
 
-
 @dataclass(frozen=True)
 class Corner:
     """A corner of the boundary: position, interior angle (radians) and its quarter
@@ -105,7 +104,6 @@ class Domain:
         return angles
 
 
-
 def lookup(keys: np.ndarray, values: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """values[keys == w] for each w of ``wanted``; NaN where absent.
 
@@ -158,4 +156,3 @@ def one_line(e: BaseException | str) -> str:
     """An error's message on one line (its type's name where it has none)."""
     text = " ".join(str(e).split())
     return text or type(e).__name__
-

@@ -69,7 +69,6 @@ def mesh_time_limit(max_triangles: float = MAX_TRIANGLES) -> float:
     return MESH_TIME_LIMIT * max(1.0, float(max_triangles) / MAX_TRIANGLES)
 
 
-
 def load(
     comm: MPI.Comm,
     path,
@@ -289,4 +288,3 @@ def _check_no_3d_mesh(source: str) -> None:
         raise GeometryError(
             f"{source!r} is a 3D mesh ({names}): only planar triangle meshes are supported"
         )
-
