@@ -16,8 +16,8 @@ singularities → results in DIR (default ``out_<geometry stem>``):
 * ``summary.json`` — energies, iterations, TAO's converged reason, mesh size and
   counts, singularities, history (written last: its presence means a complete run);
 * ``frames.bp`` — the field for ParaView (``frames.xdmf`` without ADIOS2) and the
-  same as ``frames.pvd`` (ASCII VTU, readable back with :func:`ufl_frames.io.read_vtk`),
-  see :func:`ufl_frames.io.write_field`;
+  same as ``frames.pvd`` (ASCII VTU, readable back with :func:`ufl_frames.output.read_vtk`),
+  see :func:`ufl_frames.output.write_field`;
 * ``frames.png`` — the crosses coloured by length (note Fig. 1);
 * ``convergence.png`` — H and E against the iteration (note Fig. 2).
 
@@ -42,7 +42,7 @@ under ``mpirun``) and a status, never a traceback (``UFL_FRAMES_DEBUG=1`` prints
   (meshing at once).
 
 Nothing is written unless the run completes: the results go to a hidden folder next to
-DIR, renamed into place at the end (:class:`ufl_frames.io.OutputFolder`). The one
+DIR, renamed into place at the end (:class:`ufl_frames.output.OutputFolder`). The one
 exception is the TAO solve's checkpoint, ``DIR/checkpoint/`` (:mod:`ufl_frames.checkpoint`):
 kept by an interrupted run, for ``--resume DIR``; removed when the run completes or fails.
 Under ``mpirun`` an error every rank meets alike is reported once by rank 0 and every rank
@@ -487,7 +487,7 @@ def run_solve(
     fails or loses a hole); :class:`RunError` when a solve or
     writing the results fails on every rank alike (a PETSc error, a full disk); other
     exceptions are bugs and keep their type. ``out`` is written whole or not at all
-    (:class:`ufl_frames.io.OutputFolder`). PETSc options in the database
+    (:class:`ufl_frames.output.OutputFolder`). PETSc options in the database
     (``-tao_type`` ...) are honoured; the defaults the solvers add to the database are
     removed afterwards.
     """
@@ -665,7 +665,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
     from petsc4py import PETSc
 
     from ufl_frames import checkpoint as checkpoints
-    from ufl_frames import io, solvers
+    from ufl_frames import output, solvers
     from ufl_frames.pipeline import FrameField
 
     def mbo_monitor(level, tau, change):
@@ -769,7 +769,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             print(f"{PROG}: warning: TAO stopped with {result.converged_reason}",
                   file=sys.stderr)
 
-    say(f"singularities: {io.describe_singularities(field.singularities)}")
+    say(f"singularities: {output.describe_singularities(field.singularities)}")
     index_check = field.index_theorem()  # also in the summary
     if not index_check["agrees"] and not quiet and comm.rank == 0:
         print(f"{PROG}: warning: the singularities' indices sum to {index_check['index_sum']:g}, "
@@ -800,7 +800,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
         interrupts.checkpoint(comm)
 
     ours = (checkpoints.FOLDER,) if store.written else ()
-    folder = io.OutputFolder(out, force=force, comm=comm, ours=ours)
+    folder = output.OutputFolder(out, force=force, comm=comm, ours=ours)
     try:
         with _failures(f"writing the results to {str(out)!r}", writing=True):
             staging = folder.open()
@@ -829,7 +829,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                 "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
                 "files": files,
             }
-            io.write_summary(staging / "summary.json", summary, comm=comm)
+            output.write_summary(staging / "summary.json", summary, comm=comm)
             interrupts.checkpoint(comm)
             interrupts.set_stage("commit")
             folder.commit()
@@ -862,7 +862,7 @@ class _failures:
         if exc is None or not isinstance(exc, Exception) or isinstance(exc, (InputError,
                                                                               RunError)):
             return False
-        if type(exc).__name__ == "OutputFolderBusy":  # ufl_frames.io: says it all
+        if type(exc).__name__ == "OutputFolderBusy":  # ufl_frames.output: says it all
             raise RunError(exc.strerror) from exc
         text = describe_exception(exc)
         if self.writing and isinstance(exc, OSError):
