@@ -562,7 +562,7 @@ def run_solve(
                 continue
             coarse.append(level)
     interrupts.set_stage("the MBO initial field")
-    interrupts.checkpoint(comm)
+    interrupts.raise_if_interrupted(comm)
     for note in domain.notes:
         say(f"  note: {note}")
     say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
@@ -670,7 +670,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
 
     def mbo_monitor(level, tau, change):
         say(f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}")
-        interrupts.checkpoint(comm)
+        interrupts.raise_if_interrupted(comm)
 
     def tao_monitor(e):  # interrupts are taken by keep(), called just before
         say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
@@ -687,7 +687,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                                      state.iterations % checkpoints.CHECKPOINT_EVERY == 0):
             store.save(state, field.q.function_space if V is None else V)
             interrupts.note_checkpoint(out)
-        interrupts.checkpoint(comm, signum)
+        interrupts.raise_if_interrupted(comm, signum)
 
     def restore(V):
         """The checkpoint resumed from, on the space ``V`` (None without one)."""
@@ -718,7 +718,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             result = None
         elif coarse:
             interrupts.set_stage(f"the TAO solve ({tao_type}), nested")
-            interrupts.checkpoint(comm)
+            interrupts.raise_if_interrupted(comm)
 
             finest_space = []
 
@@ -732,7 +732,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                 if finest:
                     keep(state, finest_space[-1])
                 else:
-                    interrupts.checkpoint(comm, interrupts.pending(comm))
+                    interrupts.raise_if_interrupted(comm, interrupts.pending(comm))
 
             def level_done(entry):
                 say(f"mesh {entry['level'] + 1}/{len(coarse) + 1}: {entry['triangles']} "
@@ -751,7 +751,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             result = field.result
         else:
             interrupts.set_stage(f"the TAO solve ({tao_type})")
-            interrupts.checkpoint(comm)
+            interrupts.raise_if_interrupted(comm)
             state = restore(field.q.function_space)
             say(f"solving ({kind}, TAO {tao_type}) ...")
             with _failures(f"the TAO solve ({tao_type})"):
@@ -760,7 +760,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                                      checkpoint=keep, resume=state)
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins
     interrupts.set_stage("writing the results")
-    interrupts.checkpoint(comm)
+    interrupts.raise_if_interrupted(comm)
     if result is not None:
         converged = result.converged_reason.startswith("CONVERGED")
         say(f"{result.converged_reason} after {result.iterations} iterations "
@@ -784,7 +784,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
         say(f"parametrisation: misfit {quality['misfit']:.4f}, "
             f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
             f"of length {quality['cut_length']:.3g}")
-        interrupts.checkpoint(comm)
+        interrupts.raise_if_interrupted(comm)
     if quads:
         interrupts.set_stage("the quad mesh")
         say("quad mesh ...")
@@ -797,7 +797,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
             f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
             + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
-        interrupts.checkpoint(comm)
+        interrupts.raise_if_interrupted(comm)
 
     ours = (checkpoints.FOLDER,) if store.written else ()
     folder = output.OutputFolder(out, force=force, comm=comm, ours=ours)
@@ -830,7 +830,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                 "files": files,
             }
             output.write_summary(staging / "summary.json", summary, comm=comm)
-            interrupts.checkpoint(comm)
+            interrupts.raise_if_interrupted(comm)
             interrupts.set_stage("commit")
             folder.commit()
     except BaseException:
