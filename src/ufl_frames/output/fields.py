@@ -72,7 +72,7 @@ def field_functions(q: fem.Function) -> list[fem.Function]:
 
 
 def write_field(directory, q: fem.Function, stem: str = "frames") -> list[Path]:
-    """Write the frame field into ``directory``; return the paths written (same on all ranks).
+    """Write the frame field into ``directory`` (collective).
 
     The functions of :func:`field_functions`, twice:
 
@@ -84,8 +84,14 @@ def write_field(directory, q: fem.Function, stem: str = "frames") -> list[Path]:
       the others it can be read back here without ADIOS2 or HDF5
       (:func:`~ufl_frames.output.vtk.read_vtk`).
 
-    The list is in that order (the ``.bp`` folder is one entry). Collective.
-    ``directory`` must exist.
+    Args:
+        directory: an existing folder, the same on every rank.
+        q: the frame field (P1, 5 components).
+        stem: the files' name without its suffix.
+
+    Returns:
+        The paths written, in the order above (the ``.bp`` folder is one entry), the
+        same on every rank.
     """
     check_frame_field(q)
     directory = Path(directory)

@@ -112,7 +112,7 @@ class FrameLayout(NamedTuple):
 
 
 def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> FrameLayout:
-    """Figure geometry for a domain of bounding box [lo, hi] (:class:`FrameLayout`).
+    """Figure geometry for a domain of bounding box [lo, hi].
 
     The data area has the domain's aspect ratio and :data:`AXES_AREA_IN2` square
     inches, its longer side (horizontal or vertical, as the domain comes) capped by
@@ -121,6 +121,15 @@ def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> Fram
     domains, right of the others), the legend and the title, wrapped to its width,
     and is at least :data:`FIGURE_MIN_IN`. Depends only on the shape: scaling the
     domain (mm instead of m) changes nothing but ``scale``.
+
+    Args:
+        lo: the bounding box's lower corner (x, y[, z]).
+        hi: its upper corner.
+        title: the figure's title (None: none).
+        legend: whether there is a legend (of the singularities) above the domain.
+
+    Returns:
+        The :class:`FrameLayout`.
     """
     lo, hi = np.asarray(lo, dtype=float)[:2], np.asarray(hi, dtype=float)[:2]
     extent = np.maximum(hi - lo, 1e-12 * max(float((hi - lo).max()), 1e-300))
@@ -210,17 +219,25 @@ def plot_frames(
 ) -> None:
     """Figure of the frame field ``q`` (note Fig. 1) written to ``path`` by rank 0. Collective.
 
-    Crosses at the points of :func:`glyph_samples` — about ``glyphs`` in the domain,
-    fewer where they would be closer than :data:`GLYPH_MIN_SPACING_IN` on paper
-    (``glyphs_across`` per longer side instead, if given) — each drawn as the
-    segments ±u and ±v: the longer arm has a fixed size (smaller near the boundary,
-    so that crosses do not hide holes), the shorter one is in proportion (so
-    anisotropy shows), and each arm is coloured by its branch length (the colour
-    bar gives the lengths; an isotropic field, detected at the vertices unless
-    ``isotropic`` is given, is drawn with l1 = l2 = (l1 + l2)/2). The boundary is
-    every boundary facet. ``singularities`` (``{"index", "x", "y"}``, e.g. from
-    :func:`ufl_frames.frames2d.singularities.locate_singularities`) are marked, smaller the
-    more there are. Figure size: :func:`frame_layout`.
+    Crosses at the points of :func:`~ufl_frames.output.glyphs.glyph_samples`, each drawn
+    as the segments ±u and ±v: the longer arm has a fixed size (smaller near the
+    boundary, so that crosses do not hide holes), the shorter one is in proportion (so
+    anisotropy shows), and each arm is coloured by its branch length (the colour bar
+    gives the lengths; an isotropic field is drawn with l1 = l2 = (l1 + l2)/2). The
+    boundary is every boundary facet. Singularities are marked, smaller the more there
+    are. Figure size: :func:`frame_layout`.
+
+    Args:
+        path: the PNG file (rank 0's).
+        q: the frame field (P1, 5 components).
+        title: the figure's title, wrapped to its width (None: none).
+        singularities: ``{"index", "x", "y"}`` each, e.g. from
+            :func:`ufl_frames.frames2d.singularities.locate_singularities`.
+        glyphs_across: crosses per longer side of the bounding box (None: ``glyphs``).
+        isotropic: draw the field as isotropic (None: detected at the vertices).
+        glyphs: crosses aimed at over the domain's area, fewer where they would be
+            closer than :data:`~ufl_frames.output.glyphs.GLYPH_MIN_SPACING_IN` on paper.
+        dpi: the PNG's resolution.
     """
     check_frame_field(q)
     mesh = q.function_space.mesh
@@ -326,10 +343,17 @@ def plot_convergence(
 ) -> None:
     """H(q) (log scale) and E(q) against the iteration (note Fig. 2), written by rank 0.
 
-    ``history`` is :attr:`ufl_frames.solvers.SolveResult.history` (entries with
-    ``"it"``, ``"H"``, ``"E"``). With ``levels`` (nested iteration: ``(label, history)``
-    per mesh, coarse to fine, the last being ``history``) the meshes follow one another
-    on one iteration axis, one colour each. Collective over ``comm``.
+    Collective over ``comm``.
+
+    Args:
+        path: the PNG file (rank 0's).
+        history: :attr:`ufl_frames.solvers.SolveResult.history` (entries with ``"it"``,
+            ``"H"``, ``"E"``).
+        title: the figure's title (None: none).
+        comm: the communicator whose rank 0 writes.
+        levels: nested iteration, ``(label, history)`` per mesh, coarse to fine, the last
+            being ``history``: the meshes follow one another on one iteration axis, one
+            colour each (None: one mesh).
     """
     _check_history(history)
     for _, part in levels or ():

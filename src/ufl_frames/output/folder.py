@@ -88,9 +88,13 @@ class OutputFolder:
     * ``path`` has files without ``force``: :class:`OutputFolderBusy` (checked again
       at the end: another run may have written it meanwhile).
 
-    A symbolic link to a folder as ``path`` stands for its target. ``ours``: names in
-    ``path`` that this run wrote there itself (its ``checkpoint`` folder): they do not
-    make the folder non-empty, and go when the results are put in place.
+    Args:
+        path: the output folder; a symbolic link to a folder stands for its target.
+        force: replace the run's own names in a folder that has files.
+        comm: the communicator; its rank 0 does the file work.
+        ours: names in ``path`` that this run wrote there itself (its ``checkpoint``
+            folder): they do not make the folder non-empty, and go when the results are
+            put in place.
     """
 
     def __init__(self, path, force: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,

@@ -87,15 +87,25 @@ def glyph_samples(
     glyphs: int = GLYPHS,
     spacing: float | None = None,
 ):
-    """Where to draw crosses: (points (M, 2), q there (M, 5), spacing) on rank 0. Collective.
+    """Where to draw crosses, and the field there, on rank 0 (collective).
 
-    The spacing is ``spacing`` if given, else the longer side of the bounding box /
-    ``glyphs_across`` if given, else √(area / ``glyphs``): about ``glyphs`` crosses in
-    the domain whatever its shape (holes and concave parts do not count). On a mesh
-    finer than the spacing, q is evaluated (P1 interpolation, exact for the discrete
-    field) at the points of a regular grid that lie in the domain: a regular lattice
-    of crosses. On coarser meshes every vertex gets a cross and the spacing is the
-    mean edge length. Other ranks get Nones.
+    On a mesh finer than the spacing, q is evaluated (P1 interpolation, exact for the
+    discrete field) at the points of a regular grid that lie in the domain: a regular
+    lattice of crosses. On coarser meshes every vertex gets a cross and the spacing is
+    the mean edge length.
+
+    Args:
+        q: the frame field (P1, 5 components).
+        glyphs_across: crosses across the longer side of the bounding box (used when
+            ``spacing`` is None).
+        glyphs: crosses aimed at over the domain: spacing √(area / ``glyphs``), whatever
+            its shape (holes and concave parts do not count; used when ``spacing`` and
+            ``glyphs_across`` are None).
+        spacing: the grid's step.
+
+    Returns:
+        (points (M, 2), q there (M, 5), spacing) on rank 0; on the other ranks the
+        points and rows are None.
     """
     V = q.function_space
     mesh = V.mesh
@@ -144,9 +154,18 @@ def distance_to_segments(points: np.ndarray, segments: np.ndarray) -> np.ndarray
 
 
 def glyph_segments(points, u, v, lengths, arm):
-    """Two segments per point, ±u and ±v, the longer arm ``arm`` long; colours = lengths.
+    """Two segments per point, ±u and ±v, the longer arm ``arm`` long.
 
-    ``arm`` is a number or one per point (M,).
+    Args:
+        points: the crosses' centres (M, 2).
+        u: the first branch at each point (M, 2) (:func:`~ufl_frames.output.fields.frame_vectors`).
+        v: the second branch (M, 2).
+        lengths: the branch lengths (M, 2).
+        arm: the half-length of the longer arm: a number or one per point (M,).
+
+    Returns:
+        (segments (2M, 2, 2): the u arms, then the v arms; colours (2M,): the arm's branch
+        length).
     """
     longest = lengths.max(axis=1, keepdims=True)
     scale = np.reshape(arm, (-1, 1)) / np.where(longest > 0, longest, 1.0)

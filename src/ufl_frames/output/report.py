@@ -69,6 +69,11 @@ def write_summary(path, data: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> None:
 
     Non-finite floats are written as ``NaN``/``Infinity`` (Python's JSON dialect). A
     failure (a value JSON cannot hold, a write error) is raised on every rank.
+
+    Args:
+        path: the file (rank 0's).
+        data: a dict of JSON values, NumPy scalars and arrays, and paths.
+        comm: the communicator whose rank 0 writes.
     """
     if not isinstance(data, dict):
         raise ValueError(f"data must be a dict, got {type(data).__name__}")
