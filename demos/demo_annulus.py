@@ -171,7 +171,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import io, solvers  # noqa: E402
+from ufl_frames import output, solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.constraints import frame_constraints  # noqa: E402
 from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
@@ -226,8 +226,8 @@ q0 = mbo.mbo_frame_field(
 )
 found = singularities.locate_singularities(q0)
 say(f"MBO field: H = {energy.integrability_energy(q0):.4e}, "
-    f"E = {energy.dirichlet_energy(q0):.4e}, singularities: {io.describe_singularities(found)}")
-io.plot_frames(out / "frames_initial.png", q0, title="Annulus: MBO initial field",
+    f"E = {energy.dirichlet_energy(q0):.4e}, singularities: {output.describe_singularities(found)}")
+output.plot_frames(out / "frames_initial.png", q0, title="Annulus: MBO initial field",
                singularities=found)
 
 # ### The exact isotropic solution on this mesh
@@ -403,13 +403,13 @@ for name, problem, result, label in (
     ("isotropic", problem_iso, result_iso, "isotropic"),
     ("nonisotropic", problem_aniso, result_aniso, "non-isotropic"),
 ):
-    io.plot_frames(out / f"frames_{name}.png", problem.q,
+    output.plot_frames(out / f"frames_{name}.png", problem.q,
                    title=f"Annulus, {label}: final frames (H = {result.H_final:.3g})",
                    singularities=singularities.locate_singularities(problem.q))
-    io.plot_convergence(out / f"convergence_{name}.png", result.history,
+    output.plot_convergence(out / f"convergence_{name}.png", result.history,
                         title=f"Annulus, {label}: Gauss-Newton, "
                         f"{result.iterations} iterations", comm=comm)
-    io.write_field(out, problem.q, stem=f"frames_{name}")
+    output.write_field(out, problem.q, stem=f"frames_{name}")
 
 
 # -
@@ -463,7 +463,7 @@ comm.Barrier()
 
 # The summary of the run, for scripts:
 
-io.write_summary(out / "summary.json", {
+output.write_summary(out / "summary.json", {
     "mesh_size": mesh_size, "num_vertices": num_vertices, "processes": comm.size, "ci": CI,
     "H_exact_isotropic_interpolant": H_exact,
     "isotropic": {"reason": result_iso.converged_reason, "iterations": result_iso.iterations,

@@ -44,7 +44,7 @@ from pathlib import Path  # noqa: E402
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import io  # noqa: E402
+from ufl_frames import output  # noqa: E402
 from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 
@@ -106,8 +106,8 @@ result = cold.solve(max_it=500)
 fine = nested.levels[-1]
 say(f"finest mesh, cold start: {result.iterations} Newton steps, H {result.H_final:.4e}")
 say(f"finest mesh, nested:     {fine['iterations']} Newton steps, H {fine['H']:.4e}")
-say(f"singularities, nested: {io.describe_singularities(nested.singularities)}")
-say(f"singularities, cold:   {io.describe_singularities(cold.singularities)}")
+say(f"singularities, nested: {output.describe_singularities(nested.singularities)}")
+say(f"singularities, cold:   {output.describe_singularities(cold.singularities)}")
 assert all(e["reason"].startswith("CONVERGED") for e in nested.levels)
 assert sorted(s["index"] for s in nested.singularities) == \
     sorted(s["index"] for s in cold.singularities)
@@ -121,12 +121,12 @@ assert sorted(s["index"] for s in nested.singularities) == \
 # +
 levels_plot = [(f"{e['triangles']} triangles", part)
                for e, part in zip(nested.levels, nested.level_histories, strict=True)]
-io.plot_convergence(out / "convergence_nested.png", nested.result.history,
+output.plot_convergence(out / "convergence_nested.png", nested.result.history,
                     title="piano, non-isotropic, nested iteration", comm=comm,
                     levels=levels_plot)
-io.plot_convergence(out / "convergence_cold.png", result.history,
+output.plot_convergence(out / "convergence_cold.png", result.history,
                     title="piano, non-isotropic, one mesh from MBO", comm=comm)
-io.plot_frames(out / "frames_nested.png", nested.q, title="piano, nested iteration",
+output.plot_frames(out / "frames_nested.png", nested.q, title="piano, nested iteration",
                singularities=nested.singularities)
 say(f"wrote {out}/convergence_nested.png, convergence_cold.png, frames_nested.png")
 # -

@@ -69,7 +69,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import io, solvers  # noqa: E402
+from ufl_frames import output, solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.frames2d import odeco, singularities  # noqa: E402
 from ufl_frames.mesh import build  # noqa: E402
@@ -110,8 +110,8 @@ q0 = mbo.mbo_frame_field(V)
 found_mbo = singularities.locate_singularities(q0)
 say(f"MBO field: H = {energy.integrability_energy(q0):.4e}, "
     f"E = {energy.dirichlet_energy(q0):.4e}")
-say(f"MBO singularities: {io.describe_singularities(found_mbo)}")
-io.plot_frames(out / "frames_initial.png", q0, title="Piano: MBO initial field",
+say(f"MBO singularities: {output.describe_singularities(found_mbo)}")
+output.plot_frames(out / "frames_initial.png", q0, title="Piano: MBO initial field",
                singularities=found_mbo)
 
 
@@ -144,7 +144,7 @@ def report_singularities(q, what):
     found = singularities.locate_singularities(q)
     total = sum(s["index"] for s in found)
     say(f"{what}: {len(found)} singular triangle(s), total index {total:+g}: "
-            f"{io.describe_singularities(found)}")
+            f"{output.describe_singularities(found)}")
     return found
 
 
@@ -250,11 +250,11 @@ runs = (
      "non-isotropic, aspect ≤ 4, pinned"),
 )
 for name, problem, result, found, label in runs:
-    io.plot_frames(out / f"frames_{name}.png", problem.q,
+    output.plot_frames(out / f"frames_{name}.png", problem.q,
                    title=f"Piano, {label} (H = {result.H_final:.3g})", singularities=found)
-    io.plot_convergence(out / f"convergence_{name}.png", result.history,
+    output.plot_convergence(out / f"convergence_{name}.png", result.history,
                         title=f"Piano, {label}: {result.iterations} iterations", comm=comm)
-    io.write_field(out, problem.q, stem=f"frames_{name}")
+    output.write_field(out, problem.q, stem=f"frames_{name}")
 
 
 # -
@@ -289,7 +289,7 @@ comm.Barrier()
 
 # The summary, for scripts:
 
-io.write_summary(out / "summary.json", {
+output.write_summary(out / "summary.json", {
     "mesh_size": mesh_size, "num_vertices": num_vertices, "processes": comm.size, "ci": CI,
     "singularities_mbo": found_mbo,
     **{name: {"reason": result.converged_reason, "iterations": result.iterations,

@@ -23,7 +23,9 @@ init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import checkpoint, cli, interrupts, io, petsc_options  # noqa: E402
+from ufl_frames import checkpoint, cli, interrupts, output, petsc_options  # noqa: E402
+from ufl_frames.fem import energy  # noqa: E402
+from ufl_frames.output import figures  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 MPIRUN = Path(sys.prefix) / "bin" / "mpirun"
@@ -181,7 +183,7 @@ def test_write_failure_is_one_line_and_leaves_nothing(shared_tmp, capsys, monkey
     def full_disk(path, *args):
         raise OSError(28, "No space left on device", str(path))
 
-    monkeypatch.setattr(io, "_draw_convergence", full_disk)
+    monkeypatch.setattr(figures, "_draw_convergence", full_disk)
     monkeypatch.setattr(checkpoint, "CHECKPOINT_EVERY", 1)  # checkpoints, removed too
     if COMM.rank == 0:
         (shared_tmp / "keep").mkdir()
@@ -468,15 +470,15 @@ def test_root_output_folder_is_refused(shared_tmp, capsys, monkeypatch):
 
 def test_output_folder_refuses_to_replace_another_runs_results(shared_tmp):
     out = shared_tmp / "o"
-    first = io.OutputFolder(out, comm=COMM)
-    second = io.OutputFolder(out, comm=COMM)
+    first = output.OutputFolder(out, comm=COMM)
+    second = output.OutputFolder(out, comm=COMM)
     for folder, text in ((first, "first"), (second, "second")):
         staging = folder.open()
         if COMM.rank == 0:
             (staging / "summary.json").write_text(text)
         COMM.Barrier()
     first.commit()
-    with pytest.raises((io.OutputFolderBusy, io.WriteError), match="another run"):
+    with pytest.raises((output.OutputFolderBusy, output.WriteError), match="another run"):
         second.commit()
     second.discard()
     COMM.Barrier()  # discard is rank 0's alone (not collective): wait for it before looking
@@ -485,7 +487,7 @@ def test_output_folder_refuses_to_replace_another_runs_results(shared_tmp):
 
 
 def test_output_folder_discard_removes_created_parents(shared_tmp):
-    folder = io.OutputFolder(shared_tmp / "a" / "b" / "o", comm=COMM)
+    folder = output.OutputFolder(shared_tmp / "a" / "b" / "o", comm=COMM)
     folder.open()
     folder.discard()
     COMM.Barrier()
@@ -495,9 +497,9 @@ def test_output_folder_discard_removes_created_parents(shared_tmp):
 def test_output_names():
     for name in ("summary.json", "frames.bp", "frames000000.pvtu", "frames_p12_000000.vtu",
                  "frames.png", "convergence.png", "frames.pvd", "checkpoint"):
-        assert io.is_output_name(name), name
+        assert output.is_output_name(name), name
     for name in ("notes.txt", "frames.png.bak", "my_frames.png", "frames_px_000000.vtu"):
-        assert not io.is_output_name(name), name
+        assert not output.is_output_name(name), name
 
 
 # --- library checks -----------------------------------------------------------------------------
@@ -519,18 +521,18 @@ def test_io_refuses_what_is_not_a_frame_field(shared_tmp):
         "2D": fem.Function(fem.functionspace(cube, ("Lagrange", 1, (5,)))),
     }
     for words, q in bad.items():
-        for call, first in ((io.write_field, shared_tmp), (io.plot_frames, shared_tmp / "f.png"),
-                            (io.bracket_rms, None)):
+        for call, first in ((output.write_field, shared_tmp),
+                            (output.plot_frames, shared_tmp / "f.png"), (energy.bracket_rms, None)):
             with pytest.raises(ValueError, match=words.split()[-1]):
                 call(q) if first is None else call(first, q)
     with pytest.raises(ValueError, match="history"):
-        io.plot_convergence(shared_tmp / "c.png", [], comm=COMM)
+        output.plot_convergence(shared_tmp / "c.png", [], comm=COMM)
     with pytest.raises(ValueError, match="dict"):
-        io.write_summary(shared_tmp / "s.json", [1, 2], comm=COMM)
+        output.write_summary(shared_tmp / "s.json", [1, 2], comm=COMM)
     good = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (5,))))
-    io.check_frame_field(good)
+    energy.check_frame_function(good)
     with pytest.raises(FileNotFoundError):
-        io.write_field(shared_tmp / "missing", good)
+        output.write_field(shared_tmp / "missing", good)
     assert list(shared_tmp.iterdir()) == []
 
 

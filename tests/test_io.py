@@ -1,4 +1,4 @@
-"""ufl_frames.io: summary, ParaView field, figures; serial and under MPI (no subprocesses)."""
+"""ufl_frames.output: summary, ParaView field, figures; serial and under MPI (no subprocesses)."""
 
 import json
 import math
@@ -15,7 +15,7 @@ import dolfinx  # noqa: E402
 import dolfinx.io  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import io  # noqa: E402
+from ufl_frames import output  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
 
@@ -45,7 +45,7 @@ def test_write_summary_json(shared_tmp):
     data = {"a": np.float64(1.5), "n": np.int32(3), "v": np.arange(3), "p": shared_tmp,
             "history": [{"it": 0, "H": 1.0}]}
     path = shared_tmp / "summary.json"
-    io.write_summary(path, data)
+    output.write_summary(path, data)
     back = json.loads(path.read_text())
     assert back == {"a": 1.5, "n": 3, "v": [0, 1, 2], "p": str(shared_tmp),
                     "history": [{"it": 0, "H": 1.0}]}
@@ -56,7 +56,7 @@ def test_frames_of_rows_match_odeco():
     lengths = np.array([[1.0, 2.0], [0.5, 0.5], [3.0, 1.0]])
     angles = np.array([0.1, -0.7, 0.3])
     rows = np.vstack([odeco.frames_to_q(lengths, angles), np.zeros((1, 5))])
-    got_lengths, u, v = io._frames(rows)
+    got_lengths, u, v = output.fields.frame_vectors(rows)
     np.testing.assert_allclose(np.linalg.norm(u, axis=1), got_lengths[:, 0], atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(v, axis=1), got_lengths[:, 1], atol=1e-12)
     np.testing.assert_allclose(np.einsum("ni,ni->n", u, v), 0.0, atol=1e-12)
@@ -68,7 +68,7 @@ def test_frames_of_rows_match_odeco():
 
 def test_bracket_rms_integrates_to_H():
     q = twisted_field(square_mesh())
-    rms = io.bracket_rms(q)
+    rms = energy.bracket_rms(q)
     cell_area = 2.0 * 1.0 / (2 * 16 * 8)  # uniform right triangles
     owned = rms.function_space.dofmap.index_map.size_local
     H_from_rms = COMM.allreduce(0.5 * cell_area * float(np.sum(rms.x.array[:owned] ** 2)))
@@ -80,12 +80,12 @@ def test_bracket_rms_integrates_to_H():
 def test_bracket_rms_vanishes_for_constant_frames():
     mesh = square_mesh(4)
     q = energy.interpolate_frames(energy.frame_space(mesh), lambda x: (1.0, 2.0, 0.3))
-    assert np.abs(io.bracket_rms(q).x.array).max() < 1e-12
+    assert np.abs(energy.bracket_rms(q).x.array).max() < 1e-12
 
 
 def test_field_functions():
     q = twisted_field(square_mesh(4))
-    functions = io.field_functions(q)
+    functions = output.field_functions(q)
     names = [f.name for f in functions]
     assert names == ["q", "lengths", "u", "v", "bracket_rms"]
     lengths, u, v = (f.x.array.reshape(-1, 2) for f in functions[1:4])
@@ -99,7 +99,7 @@ def test_field_functions():
 
 def test_write_field_vtx(shared_tmp):
     assert dolfinx.io.has_adios2, "this DOLFINx build should have ADIOS2"
-    paths = io.write_field(shared_tmp, twisted_field(square_mesh(4)))
+    paths = output.write_field(shared_tmp, twisted_field(square_mesh(4)))
     root_paths = COMM.bcast(paths, root=0)  # collectives first, then rank-local asserts
     assert paths[:2] == [shared_tmp / "frames.bp", shared_tmp / "frames.pvd"]
     assert paths == root_paths  # the same list on every rank
@@ -114,7 +114,7 @@ def test_write_field_vtx(shared_tmp):
 
 def test_write_field_xdmf_fallback(shared_tmp, monkeypatch):
     monkeypatch.setattr(dolfinx.io, "has_adios2", False)
-    paths = io.write_field(shared_tmp, twisted_field(square_mesh(4)), stem="fallback")
+    paths = output.write_field(shared_tmp, twisted_field(square_mesh(4)), stem="fallback")
     assert paths[:3] == [shared_tmp / "fallback.xdmf", shared_tmp / "fallback.h5",
                          shared_tmp / "fallback.pvd"]
     text = paths[0].read_text()
@@ -127,12 +127,12 @@ def test_write_field_vtk_reads_back(shared_tmp):
     """The VTK written equals the field: vertex values, cell values, mesh, H."""
     mesh = square_mesh(4)
     q = twisted_field(mesh)
-    paths = io.write_field(shared_tmp, q)
+    paths = output.write_field(shared_tmp, q)
     # The collective parts first: an assertion failing on one rank must not leave the
     # other waiting in a collective.
     H = energy.integrability_energy(q)
-    f = io.bracket_rms(q)
-    data = io.read_vtk(shared_tmp / "frames.pvd")
+    f = energy.bracket_rms(q)
+    data = output.read_vtk(shared_tmp / "frames.pvd")
     x, cells = data["points"], data["cells"]
     assert set(data["point_data"]) == {"q", "lengths", "u", "v"}
     assert set(data["cell_data"]) == {"bracket_rms"}
@@ -164,7 +164,7 @@ def test_write_field_vtk_reads_back(shared_tmp):
                                            strict=True)}
     assert all(math.isclose(in_file[c], v, rel_tol=1e-14) for c, v in mine.items())
     # The pieces are the files write_field listed.
-    pieces = io._vtk_references(shared_tmp / "frames.pvd")
+    pieces = output.vtk.vtk_references(shared_tmp / "frames.pvd")
     assert pieces == paths[2:]
 
 
@@ -176,11 +176,11 @@ def test_read_vtk_rejects_binary(tmp_path):
         'format="binary">AAAA</DataArray></Points></Piece></UnstructuredGrid></VTKFile>'
     )
     with pytest.raises(ValueError, match="ASCII"):
-        io.read_vtk(path)
+        output.read_vtk(path)
 
 
 def test_grid_points_centred():
-    points = io.grid_points(np.array([0.0, 0.0]), np.array([2.0, 1.0]), 0.3)
+    points = output.glyphs.grid_points(np.array([0.0, 0.0]), np.array([2.0, 1.0]), 0.3)
     assert points.shape[1] == 3
     x, y = np.unique(points[:, 0]), np.unique(points[:, 1])
     assert x.size == 7 and y.size == 4
@@ -190,7 +190,7 @@ def test_grid_points_centred():
 
 def test_glyph_samples_fine_mesh_uses_grid():
     q = twisted_field(square_mesh(16))  # h = 1/16, finer than 2/12
-    points, rows, spacing = io.glyph_samples(q, glyphs_across=12)
+    points, rows, spacing = output.glyph_samples(q, glyphs_across=12)
     assert math.isclose(spacing, 2.0 / 12)
     if COMM.rank == 0:
         assert points.shape == (13 * 7, 2)  # the whole grid lies in the rectangle
@@ -204,7 +204,7 @@ def test_glyph_samples_fine_mesh_uses_grid():
 def test_glyph_samples_coarse_mesh_uses_vertices():
     mesh = square_mesh(2)
     q = twisted_field(mesh)
-    points, rows, spacing = io.glyph_samples(q, glyphs_across=36)
+    points, rows, spacing = output.glyph_samples(q, glyphs_across=36)
     if COMM.rank == 0:
         assert points.shape == (mesh.topology.index_map(0).size_global, 2)
         assert rows.shape == (points.shape[0], 5)
@@ -221,7 +221,7 @@ def test_glyph_samples_count_follows_the_domain_area(annulus_mesh):
     """About ``glyphs`` crosses in the domain, not in its bounding box (4 vs 3π/4 here)."""
     q = energy.interpolate_frames(energy.frame_space(annulus(annulus_mesh, 0.04)),
                                   lambda x: (1.0, 1.0, x[0]))
-    points, _, spacing = io.glyph_samples(q, glyphs=300)
+    points, _, spacing = output.glyph_samples(q, glyphs=300)
     assert math.isclose(spacing, math.sqrt(0.75 * math.pi / 300), rel_tol=1e-3)  # mesh area
     if COMM.rank == 0:
         assert 0.85 * 300 < points.shape[0] < 1.15 * 300
@@ -232,7 +232,7 @@ def test_glyph_samples_count_follows_the_domain_area(annulus_mesh):
 @pytest.mark.parametrize(("lo", "hi"), [((0, 0), (2, 1)), ((0, 0), (20, 1)), ((0, 0), (1, 20)),
                                         ((0, 0), (65, 120)), ((-3, 5), (-1, 7))])
 def test_frame_layout_follows_the_aspect_ratio(lo, hi):
-    layout = io.frame_layout(lo, hi, title="t")
+    layout = output.frame_layout(lo, hi, title="t")
     (x0, x1), (y0, y1) = layout.limits
     w, h = layout.axes_size
     # The data area has the aspect of the domain plus margins, at the scale given.
@@ -241,25 +241,26 @@ def test_frame_layout_follows_the_aspect_ratio(lo, hi):
     assert x0 < lo[0] and x1 > hi[0] and y0 < lo[1] and y1 > hi[1]
     assert layout.horizontal == ((x1 - x0) / (y1 - y0) >= 1.4)  # wide: colour bar below
     long_side, short_side = max(w, h), min(w, h)
-    assert long_side <= io.AXES_LONG_MAX_IN[0 if w >= h else 1] + 1e-12
-    assert w * h <= io.AXES_AREA_IN2 * (1 + 1e-12)
-    if long_side < min(io.AXES_LONG_MAX_IN):  # compact shape: the full area
-        assert math.isclose(w * h, io.AXES_AREA_IN2, rel_tol=1e-12)
+    assert long_side <= output.figures.AXES_LONG_MAX_IN[0 if w >= h else 1] + 1e-12
+    assert w * h <= output.figures.AXES_AREA_IN2 * (1 + 1e-12)
+    if long_side < min(output.figures.AXES_LONG_MAX_IN):  # compact shape: the full area
+        assert math.isclose(w * h, output.figures.AXES_AREA_IN2, rel_tol=1e-12)
     assert short_side > 0.6  # a 20:1 strip is still ~120 px thick at 200 dpi
-    assert layout.figsize[0] >= io.FIGURE_MIN_IN[0] and layout.figsize[1] >= io.FIGURE_MIN_IN[1]
+    minimum = output.figures.FIGURE_MIN_IN
+    assert layout.figsize[0] >= minimum[0] and layout.figsize[1] >= minimum[1]
     assert layout.figsize[0] > w and layout.figsize[1] > h
     # Only the shape counts: the same domain in other units gives the same figure.
-    scaled = io.frame_layout(1e-3 * np.asarray(lo), 1e-3 * np.asarray(hi), title="t")
+    scaled = output.frame_layout(1e-3 * np.asarray(lo), 1e-3 * np.asarray(hi), title="t")
     assert scaled.figsize == layout.figsize and scaled.axes_size == pytest.approx((w, h))
     assert math.isclose(scaled.scale, 1e3 * layout.scale, rel_tol=1e-9)
 
 
 def test_frame_layout_orientation_and_title():
-    wide, tall = io.frame_layout((0, 0), (20, 1)), io.frame_layout((0, 0), (1, 20))
+    wide, tall = output.frame_layout((0, 0), (20, 1)), output.frame_layout((0, 0), (1, 20))
     assert wide.axes_size[0] > 10 * wide.axes_size[1] and wide.horizontal
     assert tall.axes_size[1] > 10 * tall.axes_size[0] and not tall.horizontal
     title = "a long title " * 12
-    layout = io.frame_layout((0, 0), (1, 1), title=title)
+    layout = output.frame_layout((0, 0), (1, 1), title=title)
     assert layout.title.count("\n") >= 1
     assert "".join(layout.title.split()) == "".join(title.split())  # wrapped, not cut
 
@@ -268,7 +269,7 @@ def test_frame_layout_orientation_and_title():
 def captured(monkeypatch):
     """Figures of plot_frames, kept instead of written (rank 0; closed afterwards)."""
     figures = []
-    monkeypatch.setattr(io, "_save", lambda fig, path, dpi: figures.append(fig))
+    monkeypatch.setattr(output.figures, "_save", lambda fig, path, dpi: figures.append(fig))
     yield figures
     import matplotlib.pyplot as plt
 
@@ -291,7 +292,7 @@ def test_plot_frames_figure_fits_any_aspect(captured, extent):
                                                                         0.1 * x[0]))
     title = "Frame field: a rectangle, non-isotropic, with a long title that has to wrap " * 2
     sings = [{"index": 0.25, "x": 0.5, "y": 0.5}, {"index": -0.25, "x": 0.6, "y": 0.5}]
-    io.plot_frames("unused.png", q, title=title, singularities=sings)
+    output.plot_frames("unused.png", q, title=title, singularities=sings)
     if COMM.rank != 0:
         return
     (fig,) = captured
@@ -306,7 +307,7 @@ def test_plot_frames_figure_fits_any_aspect(captured, extent):
     # The data area fills its share of the figure: no band of white around a thin strip
     # (except beside a narrow one, where the figure is at its minimum size).
     allotted, used = ax.get_position(original=True), ax.get_position()
-    at_minimum = np.isclose(fig.get_size_inches(), io.FIGURE_MIN_IN)
+    at_minimum = np.isclose(fig.get_size_inches(), output.figures.FIGURE_MIN_IN)
     assert at_minimum[0] or used.width > 0.97 * allotted.width
     assert at_minimum[1] or used.height > 0.97 * allotted.height
     assert not np.all(at_minimum)
@@ -325,7 +326,7 @@ def test_plot_frames_glyphs_stay_off_holes(captured, annulus_mesh):
     smallest arm, and interior ones keep the full arm."""
     q = energy.interpolate_frames(energy.frame_space(annulus(annulus_mesh, 0.04)),
                                   lambda x: (1.0, 1.0, np.arctan2(x[1], x[0])))
-    io.plot_frames("unused.png", q, glyphs=400)
+    output.plot_frames("unused.png", q, glyphs=400)
     if COMM.rank != 0:
         return
     (fig,) = captured
@@ -336,16 +337,16 @@ def test_plot_frames_glyphs_stay_off_holes(captured, annulus_mesh):
     segments = np.asarray(glyphs.get_segments())
     half = 0.5 * np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
     arm = half.max()
-    assert half.min() >= io.GLYPH_MIN_ARM * arm * (1 - 1e-9)
+    assert half.min() >= output.glyphs.GLYPH_MIN_ARM * arm * (1 - 1e-9)
     assert np.mean(half > 0.999 * arm) > 0.5  # most crosses are away from the boundary
     r = np.linalg.norm(segments.reshape(-1, 2), axis=1)
-    slack = io.GLYPH_MIN_ARM * arm + 1e-3  # + the sagitta of the boundary facets
+    slack = output.glyphs.GLYPH_MIN_ARM * arm + 1e-3  # + the sagitta of the boundary facets
     assert r.min() > 0.5 - slack and r.max() < 1.0 + slack
 
 
 def test_marker_size_shrinks_with_the_count():
     area = 2e5  # points², about a 6 x 6 inch domain
-    sizes = [io._marker_size(n, area) for n in (1, 20, 21, 100, 200, 2000, 20000)]
+    sizes = [output.figures._marker_size(n, area) for n in (1, 20, 21, 100, 200, 2000, 20000)]
     assert sizes[0] == sizes[1] == 80.0
     assert all(a > b for a, b in zip(sizes[1:], sizes[2:], strict=False))
     for n, s in zip((1, 20, 21, 100, 200, 2000), sizes, strict=False):
@@ -359,7 +360,7 @@ def test_plot_frames_many_singularities_are_dots(captured):
     rng = np.random.default_rng(0)
     sings = [{"index": (-1) ** k * 0.25, "x": 2 * rng.random(), "y": rng.random()}
              for k in range(1000)]
-    io.plot_frames("unused.png", q, singularities=sings)
+    output.plot_frames("unused.png", q, singularities=sings)
     if COMM.rank != 0:
         return
     (fig,) = captured
@@ -381,15 +382,16 @@ def test_plot_frames_writes_png(shared_tmp, isotropic):
     path = shared_tmp / f"frames_{isotropic}.png"
     sings = [{"index": 0.25, "x": 0.5, "y": 0.5}, {"index": -0.25, "x": 1.5, "y": 0.5},
              {"index": 0.5, "x": 1.0, "y": 0.2}]
-    io.plot_frames(path, q, title="test", singularities=sings)
+    output.plot_frames(path, q, title="test", singularities=sings)
     COMM.Barrier()
     assert path.read_bytes()[:8] == PNG_MAGIC
 
 
 def test_is_isotropic():
+    is_isotropic = output.figures._is_isotropic
     V = energy.frame_space(square_mesh(3))
-    assert io._is_isotropic(energy.interpolate_frames(V, lambda x: (1 + x[0], 1 + x[0], x[1])))
-    assert not io._is_isotropic(energy.interpolate_frames(V, lambda x: (1.0, 1.1, x[1])))
+    assert is_isotropic(energy.interpolate_frames(V, lambda x: (1 + x[0], 1 + x[0], x[1])))
+    assert not is_isotropic(energy.interpolate_frames(V, lambda x: (1.0, 1.1, x[1])))
 
 
 @pytest.mark.parametrize("H0", [1.0, 0.0])
@@ -397,7 +399,7 @@ def test_plot_convergence_writes_png(shared_tmp, H0):
     history = [{"it": k, "H": H0 * 0.5**k, "E": 2.0 + 0.1 * k, "gnorm": 1.0, "step": 1.0}
                for k in range(8)]
     path = shared_tmp / f"convergence_{H0}.png"
-    io.plot_convergence(path, history, title="test")
+    output.plot_convergence(path, history, title="test")
     COMM.Barrier()
     assert path.read_bytes()[:8] == PNG_MAGIC
 
@@ -408,26 +410,26 @@ def test_plot_convergence_of_nested_levels(shared_tmp, monkeypatch):
     levels = [(f"{n} triangles", [{"it": k, "H": 0.1 / n * 0.5**k, "E": 1.0 + k}
                                   for k in range(m)]) for n, m in ((100, 5), (400, 3))]
     drawn = {}
-    real = io._draw_convergence
+    real = output.figures._draw_convergence
 
     def spy(path, history, title, parts=None):
         drawn["parts"] = parts
         real(path, history, title, parts)
 
-    monkeypatch.setattr(io, "_draw_convergence", spy)
+    monkeypatch.setattr(output.figures, "_draw_convergence", spy)
     path = shared_tmp / "nested.png"
-    io.plot_convergence(path, levels[-1][1], title="nested", levels=levels)
+    output.plot_convergence(path, levels[-1][1], title="nested", levels=levels)
     COMM.Barrier()
     assert path.read_bytes()[:8] == PNG_MAGIC
     if COMM.rank == 0:
         assert [label for label, _ in drawn["parts"]] == ["100 triangles", "400 triangles"]
     with pytest.raises(ValueError):
-        io.plot_convergence(path, levels[-1][1], levels=[("bad", [{"it": 0}])])
+        output.plot_convergence(path, levels[-1][1], levels=[("bad", [{"it": 0}])])
 
 
 def test_describe_singularities():
-    assert io.describe_singularities([]) == "none"
-    text = io.describe_singularities(
+    assert output.describe_singularities([]) == "none"
+    text = output.describe_singularities(
         [{"index": 0.25, "x": 0.349, "y": 0.796}, {"index": -0.25, "x": 1.5, "y": 0.7}]
     )
     assert text == "+1/4 at (0.349, 0.796), -1/4 at (1.5, 0.7)"
@@ -437,11 +439,11 @@ def test_describe_many_singularities_counts_them():
     rng = np.random.default_rng(0)
     indices = [0.25] * 1379 + [-0.25] * 721 + [0.5] * 2
     sings = [{"index": k, "x": rng.random(), "y": rng.random()} for k in rng.permutation(indices)]
-    text = io.describe_singularities(sings)
+    text = output.describe_singularities(sings)
     assert text == "+2/4: 2, +1/4: 1379, -1/4: 721, index sum 165.5"
     assert "\n" not in text
-    assert io.describe_singularities(sings[:6], limit=6).count(" at (") == 6
-    assert " at (" not in io.describe_singularities(sings[:7], limit=6)
+    assert output.describe_singularities(sings[:6], limit=6).count(" at (") == 6
+    assert " at (" not in output.describe_singularities(sings[:7], limit=6)
 
 
 @pytest.mark.skipif(COMM.size == 1, reason="needs ranks given different folders")
@@ -449,4 +451,4 @@ def test_write_field_folders_differing_by_rank_fail_on_every_rank(tmp_path):
     """Each rank its own folder (a caller's mistake: VTK pieces land apart): one error on
     every rank, not rank 0 alone with the others left waiting in a collective."""
     with pytest.raises(OSError, match="same folder"):
-        io.write_field(tmp_path, twisted_field(square_mesh(4)))
+        output.write_field(tmp_path, twisted_field(square_mesh(4)))

@@ -11,7 +11,7 @@ init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import io  # noqa: E402
+from ufl_frames import output  # noqa: E402
 from ufl_frames.frames2d.aspect import aspect_bound  # noqa: E402
 from ufl_frames.mesh import annulus, load, piano  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
@@ -43,7 +43,7 @@ def test_frame_field_on_the_piano(tmp_path):
     assert field.index_theorem()["agrees"]
     names = field.write(out, label="piano", tao_type="nls")
     assert names[0] == "frames.bp" and {"frames.png", "convergence.png"} <= set(names)
-    data = io.read_vtk(out / "frames.pvd")
+    data = output.read_vtk(out / "frames.pvd")
     assert data["points"].shape[0] >= domain.num_vertices  # shared points repeat per piece
 
 

@@ -5,7 +5,7 @@
   manifold (DOLFINx);
 * :mod:`ufl_frames.solvers`: the MBO initial field and the TAO minimisation;
 * :mod:`ufl_frames.mesh`, :mod:`ufl_frames.pipeline` (``FrameField``),
-  :mod:`ufl_frames.io`, :mod:`ufl_frames.cli`: meshing, the whole run, files, commands.
+  :mod:`ufl_frames.output`, :mod:`ufl_frames.cli`: meshing, the whole run, files, commands.
 
 Everything outside ``frames2d`` needs DOLFINx; import :mod:`ufl_frames.bootstrap` first
 (and call :func:`~ufl_frames.bootstrap.init_petsc` with ``sys.argv``) so that PETSc

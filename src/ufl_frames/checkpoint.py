@@ -2,7 +2,7 @@
 
 While TAO runs, the CLI writes ``DIR/checkpoint/state.npz`` every
 :data:`CHECKPOINT_EVERY` Newton steps and when interrupted; an interrupted run leaves
-only that folder, a completed one removes it (:class:`ufl_frames.io.OutputFolder`,
+only that folder, a completed one removes it (:class:`ufl_frames.output.OutputFolder`,
 ``ours``). The file, written by rank 0 as a whole (a temporary file renamed over the
 last), holds:
 
@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ufl_frames.io import create_missing
+from ufl_frames.fem.gather import gather_rows, input_node_order
+from ufl_frames.output.folder import create_missing
 from ufl_frames.solvers.tao import SolverState
 
 __all__ = ["CHECKPOINT_EVERY", "FOLDER", "CheckpointError", "CheckpointFolder",
@@ -44,45 +45,17 @@ class CheckpointWriteError(RuntimeError):
     """A checkpoint could not be written (one-line message; a failure of the run)."""
 
 
-def _node_order(V) -> np.ndarray:
-    """Input node index of every local dof (owned and ghost) of the P1 space ``V``."""
-    geometry = V.mesh.geometry
-    nodes = np.asarray(geometry.input_global_indices, dtype=np.int64)
-    index_map = V.dofmap.index_map
-    order = np.full(index_map.size_local + index_map.num_ghosts, -1, dtype=np.int64)
-    # P1: the dofs of a cell are its vertices, in the order of its geometry nodes.
-    order[V.dofmap.list.ravel()] = nodes[geometry.dofmaps[0].ravel()]
-    return order
-
-
-def _gather(V, values: np.ndarray, comm) -> np.ndarray | None:
-    """The owned rows of ``values`` (local dof order) of every rank in input node order,
-    on rank 0 (None elsewhere)."""
-    n = V.dofmap.index_map.size_local
-    parts = comm.gather((_node_order(V)[:n], np.asarray(values)[:n]), root=0)
-    if comm.rank != 0:
-        return None
-    total = V.dofmap.index_map.size_global
-    out = np.zeros((total, *np.asarray(values).shape[1:]), dtype=np.asarray(values).dtype)
-    for index, part in parts:
-        out[index] = part
-    return out
-
-
 def mesh_key(mesh) -> str:
     """SHA-256 of the mesh's vertex coordinates in input node order and its cell count
     (collective; the same on every rank): a checkpoint of another mesh is refused."""
     comm = mesh.comm
     geometry = mesh.geometry
     nodes = np.asarray(geometry.input_global_indices, dtype=np.int64)
-    parts = comm.gather((nodes, np.ascontiguousarray(geometry.x[:, :2])), root=0)
+    x = gather_rows(comm, np.ascontiguousarray(geometry.x[:, :2]), index=nodes)
     cells = mesh.topology.index_map(2).size_global
     key = None
     if comm.rank == 0:
-        count = int(max(int(p[0].max(initial=-1)) for p in parts) + 1)
-        x = np.zeros((count, 2))
-        for index, coords in parts:
-            x[index] = coords
+        count = x.shape[0]
         digest = hashlib.sha256(np.int64([count, cells]).tobytes())
         digest.update(np.ascontiguousarray(x).tobytes())
         key = digest.hexdigest()
@@ -107,14 +80,20 @@ class CheckpointFolder:
 
     def save(self, state: SolverState, V) -> None:
         """Write ``state`` of the field on the P1 space ``V`` (collective)."""
-        q = _gather(V, state.rows, self.comm)
         n = V.dofmap.index_map.size_local
+        order = input_node_order(V)[:n]
+        total = V.dofmap.index_map.size_global
+
+        def gather(values):  # the owned rows of every rank, in input node order
+            return gather_rows(self.comm, np.asarray(values)[:n], index=order, size=total)
+
+        q = gather(state.rows)
         flags = {}
         for name in ("active", "held", "released"):
             array = getattr(state, name)
             present = self.comm.allreduce(array is not None)
-            flags[name] = _gather(V, np.zeros(n, np.int8) if array is None
-                                  else array[:n].astype(np.int8), self.comm) if present else None
+            flags[name] = gather(np.zeros(n, np.int8) if array is None
+                                 else array[:n].astype(np.int8)) if present else None
         error = None
         if self.comm.rank == 0:
             meta = {
@@ -242,7 +221,7 @@ def restore(meta: dict, V, comm) -> SolverState:
     """The :class:`~ufl_frames.solvers.SolverState` of a checkpoint (:func:`read`) on this
     rank's rows of the P1 space ``V`` (collective)."""
     arrays = comm.bcast(meta["arrays"] if comm.rank == 0 else None, root=0)
-    order = _node_order(V)
+    order = input_node_order(V)
     n = V.dofmap.index_map.size_local
     if arrays["q"].shape[0] != V.dofmap.index_map.size_global or order.min() < 0:
         raise CheckpointError("cannot resume: the checkpoint's field does not fit the mesh")

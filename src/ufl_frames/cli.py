@@ -16,8 +16,8 @@ singularities → results in DIR (default ``out_<geometry stem>``):
 * ``summary.json`` — energies, iterations, TAO's converged reason, mesh size and
   counts, singularities, history (written last: its presence means a complete run);
 * ``frames.bp`` — the field for ParaView (``frames.xdmf`` without ADIOS2) and the
-  same as ``frames.pvd`` (ASCII VTU, readable back with :func:`ufl_frames.io.read_vtk`),
-  see :func:`ufl_frames.io.write_field`;
+  same as ``frames.pvd`` (ASCII VTU, readable back with :func:`ufl_frames.output.read_vtk`),
+  see :func:`ufl_frames.output.write_field`;
 * ``frames.png`` — the crosses coloured by length (note Fig. 1);
 * ``convergence.png`` — H and E against the iteration (note Fig. 2).
 
@@ -42,7 +42,7 @@ under ``mpirun``) and a status, never a traceback (``UFL_FRAMES_DEBUG=1`` prints
   (meshing at once).
 
 Nothing is written unless the run completes: the results go to a hidden folder next to
-DIR, renamed into place at the end (:class:`ufl_frames.io.OutputFolder`). The one
+DIR, renamed into place at the end (:class:`ufl_frames.output.OutputFolder`). The one
 exception is the TAO solve's checkpoint, ``DIR/checkpoint/`` (:mod:`ufl_frames.checkpoint`):
 kept by an interrupted run, for ``--resume DIR``; removed when the run completes or fails.
 Under ``mpirun`` an error every rank meets alike is reported once by rank 0 and every rank
@@ -487,7 +487,7 @@ def run_solve(
     fails or loses a hole); :class:`RunError` when a solve or
     writing the results fails on every rank alike (a PETSc error, a full disk); other
     exceptions are bugs and keep their type. ``out`` is written whole or not at all
-    (:class:`ufl_frames.io.OutputFolder`). PETSc options in the database
+    (:class:`ufl_frames.output.OutputFolder`). PETSc options in the database
     (``-tao_type`` ...) are honoured; the defaults the solvers add to the database are
     removed afterwards.
     """
@@ -561,7 +561,7 @@ def run_solve(
                 continue
             coarse.append(level)
     interrupts.set_stage("the MBO initial field")
-    interrupts.checkpoint(comm)
+    interrupts.raise_if_interrupted(comm)
     for note in domain.notes:
         say(f"  note: {note}")
     say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
@@ -663,12 +663,12 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
     from petsc4py import PETSc
 
     from ufl_frames import checkpoint as checkpoints
-    from ufl_frames import io, solvers
+    from ufl_frames import output, solvers
     from ufl_frames.pipeline import FrameField
 
     def mbo_monitor(level, tau, change):
         say(f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}")
-        interrupts.checkpoint(comm)
+        interrupts.raise_if_interrupted(comm)
 
     def tao_monitor(e):  # interrupts are taken by keep(), called just before
         say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
@@ -685,7 +685,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                                      state.iterations % checkpoints.CHECKPOINT_EVERY == 0):
             store.save(state, field.q.function_space if V is None else V)
             interrupts.note_checkpoint(out)
-        interrupts.checkpoint(comm, signum)
+        interrupts.raise_if_interrupted(comm, signum)
 
     def restore(V):
         """The checkpoint resumed from, on the space ``V`` (None without one)."""
@@ -716,7 +716,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             result = None
         elif coarse:
             interrupts.set_stage(f"the TAO solve ({tao_type}), nested")
-            interrupts.checkpoint(comm)
+            interrupts.raise_if_interrupted(comm)
 
             finest_space = []
 
@@ -730,7 +730,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                 if finest:
                     keep(state, finest_space[-1])
                 else:
-                    interrupts.checkpoint(comm, interrupts.pending(comm))
+                    interrupts.raise_if_interrupted(comm, interrupts.pending(comm))
 
             def level_done(entry):
                 say(f"mesh {entry['level'] + 1}/{len(coarse) + 1}: {entry['triangles']} "
@@ -749,7 +749,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             result = field.result
         else:
             interrupts.set_stage(f"the TAO solve ({tao_type})")
-            interrupts.checkpoint(comm)
+            interrupts.raise_if_interrupted(comm)
             state = restore(field.q.function_space)
             say(f"solving ({kind}, TAO {tao_type}) ...")
             with _failures(f"the TAO solve ({tao_type})"):
@@ -758,7 +758,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                                      checkpoint=keep, resume=state)
         max_it = PETSc.Options().getInt("tao_max_it", max_it)  # -tao_max_it wins
     interrupts.set_stage("writing the results")
-    interrupts.checkpoint(comm)
+    interrupts.raise_if_interrupted(comm)
     if result is not None:
         converged = result.converged_reason.startswith("CONVERGED")
         say(f"{result.converged_reason} after {result.iterations} iterations "
@@ -767,7 +767,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             print(f"{PROG}: warning: TAO stopped with {result.converged_reason}",
                   file=sys.stderr)
 
-    say(f"singularities: {io.describe_singularities(field.singularities)}")
+    say(f"singularities: {output.describe_singularities(field.singularities)}")
     index_check = field.index_theorem()  # also in the summary
     if not index_check["agrees"] and not quiet and comm.rank == 0:
         print(f"{PROG}: warning: the singularities' indices sum to {index_check['index_sum']:g}, "
@@ -782,7 +782,7 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
         say(f"parametrisation: misfit {quality['misfit']:.4f}, "
             f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
             f"of length {quality['cut_length']:.3g}")
-        interrupts.checkpoint(comm)
+        interrupts.raise_if_interrupted(comm)
     if quads:
         interrupts.set_stage("the quad mesh")
         say("quad mesh ...")
@@ -795,10 +795,10 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
             f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
             f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
             + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
-        interrupts.checkpoint(comm)
+        interrupts.raise_if_interrupted(comm)
 
     ours = (checkpoints.FOLDER,) if store.written else ()
-    folder = io.OutputFolder(out, force=force, comm=comm, ours=ours)
+    folder = output.OutputFolder(out, force=force, comm=comm, ours=ours)
     try:
         with _failures(f"writing the results to {str(out)!r}", writing=True):
             staging = folder.open()
@@ -827,8 +827,8 @@ def _solve_and_write(domain, store, saved, say, start, out, geometry, comm, *, i
                 "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
                 "files": files,
             }
-            io.write_summary(staging / "summary.json", summary, comm=comm)
-            interrupts.checkpoint(comm)
+            output.write_summary(staging / "summary.json", summary, comm=comm)
+            interrupts.raise_if_interrupted(comm)
             interrupts.set_stage("commit")
             folder.commit()
     except BaseException:
@@ -860,7 +860,7 @@ class _failures:
         if exc is None or not isinstance(exc, Exception) or isinstance(exc, (InputError,
                                                                               RunError)):
             return False
-        if type(exc).__name__ == "OutputFolderBusy":  # ufl_frames.io: says it all
+        if type(exc).__name__ == "OutputFolderBusy":  # ufl_frames.output: says it all
             raise RunError(exc.strerror) from exc
         text = describe_exception(exc)
         if self.writing and isinstance(exc, OSError):

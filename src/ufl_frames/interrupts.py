@@ -1,9 +1,9 @@
 """Interrupts (SIGINT, SIGTERM) during a run, turned into a clean stop.
 
 :class:`SignalWatch` takes the signals in a helper thread, so they are seen while the
-main thread is in C (Gmsh, a KSP solve); the run asks at its checkpoints
-(:func:`checkpoint`: every MBO level and TAO iteration, between stages) and stops there
-with :class:`Interrupted`, or, past :data:`INTERRUPT_GRACE_S`, the helper thread ends the
+main thread is in C (Gmsh, a KSP solve); the run asks at its stop points
+(:func:`raise_if_interrupted`: every MBO level and TAO iteration, between stages) and stops
+there with :class:`Interrupted`, or, past :data:`INTERRUPT_GRACE_S`, the helper thread ends the
 process with :data:`INTERRUPTED_STATUS` after removing the staging folder. A run that
 has written a checkpoint (:func:`note_checkpoint`) says how to resume it.
 """
@@ -15,7 +15,7 @@ import threading
 import time
 
 __all__ = ["INTERRUPTED_STATUS", "INTERRUPT_GRACE_S", "Interrupted", "SignalWatch",
-           "checkpoint", "note_checkpoint", "pending", "set_stage"]
+           "note_checkpoint", "pending", "raise_if_interrupted", "set_stage"]
 
 #: Exit status of an interrupted run (SIGINT or SIGTERM).
 INTERRUPTED_STATUS = 130
@@ -47,8 +47,8 @@ class SignalWatch:
     (``sigtimedwait``), so that they are seen even while the main thread is in C (Gmsh,
     a KSP solve). A Python exception raised inside a PETSc callback (TAO's objective or
     Hessian product) is turned by PETSc into an error and, today, a crash; so the run
-    itself asks, at its checkpoints (each MBO level and TAO iteration, between stages:
-    :func:`checkpoint`), and raises there. If it does not ask within
+    itself asks, at its stop points (each MBO level and TAO iteration, between stages:
+    :func:`raise_if_interrupted`), and raises there. If it does not ask within
     :data:`INTERRUPT_GRACE_S` seconds (a long Gmsh or compilation step), or at once in
     the ``"meshing"`` stage or on a second signal, the helper thread reports, removes the
     staging folder and ends the process with :data:`INTERRUPTED_STATUS`. During the
@@ -147,7 +147,8 @@ _WATCH: SignalWatch | None = None  # the current run's (see activate)
 
 
 def activate(watch: SignalWatch | None) -> None:
-    """Make ``watch`` the one :func:`set_stage` and :func:`checkpoint` use (None: none)."""
+    """Make ``watch`` the one :func:`set_stage` and :func:`raise_if_interrupted` use
+    (None: none)."""
     global _WATCH
     _WATCH = watch
 
@@ -183,7 +184,7 @@ def pending(comm) -> int:
     return signum
 
 
-def checkpoint(comm, signum: int | None = None) -> None:
+def raise_if_interrupted(comm, signum: int | None = None) -> None:
     """Raise :class:`Interrupted` on every rank if any rank was signalled (collective;
     ``signum``: what :func:`pending` said just before, not asked again)."""
     signum = pending(comm) if signum is None else signum

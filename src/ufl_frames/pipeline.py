@@ -25,7 +25,7 @@ init_petsc()
 import dolfinx.fem as fem  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ufl_frames import io, solvers  # noqa: E402
+from ufl_frames import output, solvers  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
 from ufl_frames.frames2d import singularities  # noqa: E402
@@ -411,9 +411,9 @@ class FrameField:
         into the existing folder ``out``; the names written (collective)."""
         out = Path(out)
         kind = "isotropic" if self.isotropic else "non-isotropic"
-        names = [p.name for p in io.write_field(out, self.q)]
+        names = [p.name for p in output.write_field(out, self.q)]
         H = f" (H = {self.result.H_final:.3g})" if self.result is not None else ""
-        io.plot_frames(out / "frames.png", self.q, title=f"Frame field: {label}, {kind}{H}",
+        output.plot_frames(out / "frames.png", self.q, title=f"Frame field: {label}, {kind}{H}",
                        singularities=self.singularities)
         names.append("frames.png")
         if self.result is not None:
@@ -424,7 +424,7 @@ class FrameField:
                           in zip(self.levels, self.level_histories, strict=True)]
                 iterations = (f"{' + '.join(str(e['iterations']) for e in self.levels)} "
                               f"iterations on {len(self.levels)} meshes")
-            io.plot_convergence(
+            output.plot_convergence(
                 out / "convergence.png", self.result.history,
                 title=f"{label}, {kind}: {iterations}{method}",
                 comm=self.domain.comm, levels=levels,

@@ -130,3 +130,28 @@ def integrability_energy(q) -> float:
 def dirichlet_energy(q) -> float:
     """E(q) = ½ ∫ |∇q|² dx of a frame Function q, collective over MPI."""
     return assemble_energy(dirichlet_energy_form(q))
+
+
+def bracket_rms(q: fem.Function) -> fem.Function:
+    r"""Cell-wise RMS of the Lie bracket, :math:`\sqrt{|K|^{-1}\int_K |[u,v]|^2\,dx}`, in DG0.
+
+    The L² projection of :math:`|[u,v]|^2` onto piecewise constants, then the square
+    root: :math:`\tfrac12\sum_K |K|\,b_K^2 = H(q)` exactly, so the picture shows where
+    the integrability energy sits. (On each cell [u,v] is linear in x; a value at
+    one point, e.g. ``fem.Expression`` at the centroid, would miss part of it.)
+    """
+    check_frame_function(q)
+    mesh = q.function_space.mesh
+    D0 = fem.functionspace(mesh, ("DG", 0))
+    w = ufl.TestFunction(D0)
+    bracket = lie_bracket(q)
+    density = fem.assemble_vector(fem.form(ufl.inner(bracket, bracket) * w * ufl.dx))
+    volume = fem.assemble_vector(fem.form(w * ufl.dx))
+    owned = D0.dofmap.index_map.size_local
+    out = fem.Function(D0, name="bracket_rms")
+    out.x.array[:owned] = np.sqrt(
+        np.maximum(density.array[:owned], 0.0) / volume.array[:owned]
+    )
+    out.x.scatter_forward()
+    return out
+

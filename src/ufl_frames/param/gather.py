@@ -11,6 +11,7 @@ init_petsc()
 
 import numpy as np  # noqa: E402
 
+from ufl_frames.fem.gather import gather_rows  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
 
 __all__ = ["gather_field"]
@@ -29,13 +30,11 @@ def gather_field(q, root: int = 0):
     ids = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
     rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
     dofs = V.dofmap.list[:owned]  # P1: a cell's dofs are its vertices, in node order
-    local = (ids[nodes], mesh.geometry.x[nodes.ravel(), :2], rows[dofs.ravel()])
-    parts = comm.gather(local, root=root)
+    cells = gather_rows(comm, ids[nodes], root=root)
+    x_all = gather_rows(comm, mesh.geometry.x[nodes.ravel(), :2], root=root)
+    q_all = gather_rows(comm, rows[dofs.ravel()], root=root)
     if comm.rank != root:
         return None, None, None
-    cells = np.concatenate([p[0] for p in parts])
     flat = cells.ravel()
-    x_all = np.concatenate([p[1] for p in parts])
-    q_all = np.concatenate([p[2] for p in parts])
     numbers, first, inverse = np.unique(flat, return_index=True, return_inverse=True)
     return x_all[first], inverse.reshape(-1, 3), q_all[first]
