@@ -18,6 +18,7 @@ from mpi4py import MPI
 from ufl_frames import cli
 from ufl_frames.fem import energy
 from ufl_frames.fem.conformal import conformal_field
+from ufl_frames.fem.constraints import lumped_mass
 from ufl_frames.frames2d import odeco
 from ufl_frames.mesh import annulus, piano
 from ufl_frames.pipeline import FrameField
@@ -99,3 +100,52 @@ def test_cli_conformal_runs_no_tao(tmp_path):
     assert "convergence.png" not in summary["files"]
     assert summary["param"]["flipped_triangles"] == 0
     assert summary["H_final"] > 0
+
+
+TWO_ANNULI = """SetFactory("OpenCASCADE");
+Disk(1) = {0, 0, 0, 1};
+Disk(2) = {0, 0, 0, 0.5};
+BooleanDifference(3) = {Surface{1}; Delete;}{Surface{2}; Delete;};
+Disk(4) = {3, 0, 0, 1};
+Disk(5) = {3, 0, 0, 0.5};
+BooleanDifference(6) = {Surface{4}; Delete;}{Surface{5}; Delete;};
+"""
+
+
+def test_two_components_each_get_their_scale(tmp_path):
+    """Two annuli apart, radial frames of lengths 1/r on the first and 3/r' on the second:
+    each component is its own Poisson problem (a constant null vector each), so on each
+    the length becomes ∝ r' (r' the distance to its own centre), and each keeps the input's
+    lumped L² norm on it (the second's is 3x the first's)."""
+    path = tmp_path / "two_annuli.geo"
+    if COMM.rank == 0:
+        path.write_text(TWO_ANNULI)
+    COMM.barrier()
+    domain = geometry.load(COMM, path, mesh_size=0.05)
+    V = energy.frame_space(domain.mesh)
+
+    def frames(x):
+        right = x[0] > 1.5
+        r = np.hypot(x[0] - 3 * right, x[1])
+        length = np.where(right, 3.0, 1.0) / r
+        return length, length, np.arctan2(x[1], x[0] - 3 * right)
+
+    q_in = energy.interpolate_frames(V, frames)
+    q = conformal_field(q_in)
+    x = V.tabulate_dof_coordinates()
+    right = x[:, 0] > 1.5
+    r = np.hypot(x[:, 0] - 3 * right, x[:, 1])
+    lengths, _ = odeco.q_to_frames(q.x.array.reshape(-1, 5))
+    mass = lumped_mass(V)
+    owned = V.dofmap.index_map.size_local
+    for side in (False, True):
+        ratio = lengths[right == side, 0] / r[right == side]
+        hi = COMM.allreduce(float(ratio.max(initial=-np.inf)), op=MPI.MAX)
+        lo = COMM.allreduce(float(ratio.min(initial=np.inf)), op=MPI.MIN)
+        assert hi / lo - 1 < 0.02, (side, hi / lo)
+        mine = (right == side)[:owned]
+        norms = [COMM.allreduce(float(np.dot(mass[:owned][mine],
+                                             np.sum(v.x.array.reshape(-1, 5)[:owned][mine] ** 2,
+                                                    axis=1))), op=MPI.SUM)
+                 for v in (q_in, q)]
+        assert norms[1] == pytest.approx(norms[0], rel=1e-10)

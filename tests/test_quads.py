@@ -247,3 +247,21 @@ def test_every_integer_point_of_the_map_is_one_quad_corner():
     distance = np.linalg.norm(quads.points[:, None] - expected[None], axis=2)
     assert distance.min(axis=1).max() < 1e-12
     assert np.unique(distance.argmin(axis=1)).size == len(found)
+
+
+def test_two_components_give_two_exact_grids():
+    """Two rectangles apart, [0, 2] × [0, 1] and [3, 4] × [0, 1.5], with the constant
+    frame: each its own map and anchor, each the exact grid of its size (8 × 4 and 4 × 6
+    quads at scale 4), the quads conforming within each and covering the area."""
+    x1, c1 = grid(8, 6, 0, 2, 0, 1)
+    x2, c2 = grid(5, 7, 3, 4, 0, 1.5)
+    x, cells = np.vstack([x1, x2]), np.vstack([c1, c2 + x1.shape[0]])
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    assert mesh.cut.size == 0  # no singularity, no hole: each component a disk already
+    grid_map = quantise.quantise(mesh, 4.0)
+    quads = extract.extract_quads(grid_map)
+    assert quads.num_quads == 8 * 4 + 4 * 6
+    assert check_quad_mesh(quads.points, quads.quads, area=2.0 + 1.5, rtol=1e-9) == []
+    left = quads.points[:, 0] < 2.5
+    assert np.unique(np.round(quads.points[left, 0] * 4, 6)).size == 9
+    assert np.unique(np.round(quads.points[~left, 1] * 4, 6)).size == 7

@@ -21,8 +21,9 @@ Poisson solve only needs as a right-hand side. The angle t is read from the Odec
 coefficients: C = q₃ + i q₄ ∝ e^{4it}, so ∇t = (q₃∇q₄ − q₄∇q₃) / (4 |C|²), written in UFL.
 
 The linear solve is a PETSc KSP (prefix ``conformal_``: CG with GAMG by default, the
-constants removed as its null space); the result is the isotropic field (l, l, t) at the
-vertices, scaled to the lumped L² norm of the input field.
+constants of every connected component removed as its null space); the result is the
+isotropic field (l, l, t) at the vertices, scaled on each component to the lumped L² norm
+of the input field there.
 """
 
 from contextlib import ExitStack
@@ -38,6 +39,7 @@ import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
+from ufl_frames.fem.components import dof_components  # noqa: E402
 from ufl_frames.fem.constraints import lumped_mass  # noqa: E402
 from ufl_frames.fem.energy import check_frame_function  # noqa: E402
 from ufl_frames.frames2d import odeco  # noqa: E402
@@ -81,11 +83,15 @@ def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.
         b = dolfinx.fem.petsc.assemble_vector(L)
         owned.callback(b.destroy)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        constant = A.createVecRight()
-        owned.callback(constant.destroy)
-        constant.set(1.0)
-        constant.normalize()
-        nullspace = PETSc.NullSpace().create(vectors=[constant], comm=mesh.comm)
+        count, component = dof_components(S)
+        constants = []
+        for c in range(count):  # one constant a component: disjoint, so orthogonal
+            constant = A.createVecRight()
+            owned.callback(constant.destroy)
+            constant.array[:] = component[: constant.getLocalSize()] == c
+            constant.normalize()
+            constants.append(constant)
+        nullspace = PETSc.NullSpace().create(vectors=constants, comm=mesh.comm)
         owned.callback(nullspace.destroy)
         A.setNullSpace(nullspace)
         nullspace.remove(b)
@@ -107,16 +113,30 @@ def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.
     values = np.empty(rows.shape[0])
     values[row_of] = phi.x.array
     owned_rows = V.dofmap.index_map.size_local
-    shift = mesh.comm.allreduce(float(values[:owned_rows].max(initial=-np.inf)), op=MPI.MAX)
-    length = np.exp(-(values - shift))  # ≤ 1 before the normalisation: no overflow
+    label = np.empty(rows.shape[0], dtype=np.int64)
+    label[row_of] = component
+    # φ is fixed up to a constant on each component, the length up to a factor: each
+    # component is scaled to q's lumped L² norm on it (one component: the whole mesh)
+    shift = _per_component(mesh.comm, values[:owned_rows], label[:owned_rows], count, MPI.MAX)
+    length = np.exp(-(values - shift[label]))  # ≤ 1 before the normalisation: no overflow
     result = fem.Function(V, name="q")
     result.x.array[:] = odeco.frames_to_q(np.stack([length, length], axis=1), angles).ravel()
     result.x.scatter_forward()
     mass = lumped_mass(V)[:owned_rows]
-    norm_in = mesh.comm.allreduce(float(np.dot(mass, np.sum(rows[:owned_rows] ** 2, axis=1))),
-                                  op=MPI.SUM)
     out_rows = result.x.array.reshape(-1, k)
-    norm_out = mesh.comm.allreduce(
-        float(np.dot(mass, np.sum(out_rows[:owned_rows] ** 2, axis=1))), op=MPI.SUM)
-    result.x.array[:] *= np.sqrt(norm_in / norm_out)
+    norm_in, norm_out = (
+        _per_component(mesh.comm, mass * np.sum(r[:owned_rows] ** 2, axis=1),
+                       label[:owned_rows], count, MPI.SUM)
+        for r in (rows, out_rows))
+    result.x.array[:] *= np.repeat(np.sqrt(norm_in / norm_out)[label], k)
     return result
+
+
+def _per_component(comm, values: np.ndarray, label: np.ndarray, count: int, op) -> np.ndarray:
+    """The maximum (``op`` MPI.MAX) or sum (MPI.SUM) of ``values`` on every component
+    (``label``, ``count`` of them) over all ranks."""
+    local = np.full(count, -np.inf if op == MPI.MAX else 0.0)
+    (np.maximum if op == MPI.MAX else np.add).at(local, label, values)
+    total = np.empty_like(local)
+    comm.Allreduce(local, total, op=op)
+    return total

@@ -30,7 +30,7 @@ from scipy.sparse import csgraph
 from ufl_frames.frames2d import odeco
 
 __all__ = ["CutMesh", "cancel_pairs", "comb", "cut_graph", "cut_mesh", "face_frames", "matchings",
-           "singular_vertices", "wedges"]
+           "singular_vertices", "triangle_components", "wedges"]
 
 QUARTER = np.pi / 2
 
@@ -217,12 +217,23 @@ def _boundary_loops(edges, faces, n):
     return loops
 
 
+def triangle_components(faces, m: int) -> tuple[int, np.ndarray]:
+    """The connected components of the mesh (triangles joined across interior edges):
+    their number and the component of every triangle (m,)."""
+    inner = faces[:, 1] >= 0
+    f, g = faces[inner, 0], faces[inner, 1]
+    graph = sp.csr_matrix((np.ones(f.size), (f, g)), shape=(m, m))
+    count, label = csgraph.connected_components(graph, directed=False)
+    return int(count), label
+
+
 def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
     """Edge ids (into ``edges``) to cut along, and the number of cut paths.
 
     Shortest paths over the interior edges: from each inner boundary loop (the loops
-    other than the longest) and then from each singular vertex to the set cut so far,
-    which starts as the longest boundary loop and grows by every path and loop added.
+    other than the longest of their component) and then from each singular vertex to the
+    set cut so far, which starts as the longest boundary loop of every component of the
+    mesh and grows by every path and loop added.
     """
     n = x.shape[0]
     length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
@@ -235,11 +246,19 @@ def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
     loops = _boundary_loops(edges, faces, n)
     perimeter = [length[np.isin(edges[:, 0], loop) & np.isin(edges[:, 1], loop)
                         & ~inner].sum() for loop in loops]
-    order = np.argsort(perimeter)[::-1]
+    count, triangle_label = triangle_components(faces, cells.shape[0])
+    vertex_label = np.full(n, -1, dtype=np.int64)
+    vertex_label[cells.ravel()] = np.repeat(triangle_label, 3)
+    order = np.argsort(perimeter, kind="stable")[::-1]
     in_cut = np.zeros(n, bool)
-    in_cut[loops[order[0]]] = True
+    outer = {}  # the longest loop of each component
+    for i in order:
+        outer.setdefault(int(vertex_label[loops[i][0]]), int(i))
+    for i in outer.values():
+        in_cut[loops[i]] = True
     cut, paths = [], 0
-    targets = [loops[i] for i in order[1:]] + [np.array([v]) for v in singular]
+    targets = ([loops[i] for i in order if int(i) not in outer.values()]
+               + [np.array([v]) for v in singular])
     for target in targets:
         if in_cut[target].all():
             continue
@@ -262,7 +281,8 @@ def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
 
 def comb(angle, faces, k, cut) -> np.ndarray:
     """Label turn r_f per triangle: r_g = r_f + k_fg across the edges of a spanning tree of
-    the dual graph without the cut edges (breadth first from triangle 0)."""
+    the dual graph without the cut edges (breadth first from the first triangle of every
+    component of the mesh)."""
     m = angle.size
     inner = faces[:, 1] >= 0
     allowed = inner.copy()
@@ -271,12 +291,21 @@ def comb(angle, faces, k, cut) -> np.ndarray:
     f, g = faces[ids, 0], faces[ids, 1]
     graph = sp.csr_matrix((ids + 1.0, (f, g)), shape=(m, m))
     graph = graph + graph.T
-    count, _ = csgraph.connected_components(graph, directed=False)
-    if count != 1:
+    count, label = csgraph.connected_components(graph, directed=False)
+    pieces, _ = triangle_components(faces, m)
+    if count != pieces:
         raise ValueError(f"the cut splits the mesh into {count} pieces")
-    order, predecessors = csgraph.breadth_first_order(graph, 0, directed=False,
-                                                      return_predecessors=True)
     r = np.zeros(m, dtype=np.int64)
+    for root in (int(np.flatnonzero(label == c)[0]) for c in range(count)):
+        order, predecessors = csgraph.breadth_first_order(graph, root, directed=False,
+                                                          return_predecessors=True)
+        _comb_tree(r, order, predecessors, graph, faces, k)
+    return np.mod(r, 4)
+
+
+def _comb_tree(r, order, predecessors, graph, faces, k) -> None:
+    """Turns ``r`` of a breadth-first tree's triangles (``order``, root first) from the
+    root's, across the dual edges ``graph`` (edge id + 1) by the matchings ``k``."""
     for child in order[1:]:
         parent = predecessors[child]
         e = int(graph[parent, child]) - 1
@@ -284,7 +313,6 @@ def comb(angle, faces, k, cut) -> np.ndarray:
             r[child] = r[parent] + k[e]
         else:  # the child is faces[e, 0]: the inverse turn
             r[child] = r[parent] - k[e]
-    return np.mod(r, 4)
 
 
 def jumps(faces, k, r) -> np.ndarray:

@@ -20,8 +20,9 @@ next one fixed is the one whose rounding costs the least energy. Functionals tha
 ones already determine (the same curve seen from two edges, the anchor's) are not rounded
 again; they come out integer by themselves.
 
-The global translation is removed by anchoring a wedge that is integer anyway: a singular
-vertex, else a boundary corner (both coordinates constant), else a boundary vertex.
+The translation of every connected component is removed by anchoring one of its wedges
+that is integer anyway: a singular vertex, else a boundary corner (both coordinates
+constant), else a boundary vertex.
 Pure NumPy/SciPy.
 """
 
@@ -31,10 +32,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ufl_frames.param.cut import CutMesh
+from ufl_frames.param.cut import CutMesh, triangle_components
 from ufl_frames.param.seamless import (
     Parametrisation,
     boundary_coordinates,
+    first_wedges,
     invalid,
     least_squares_system,
     parametrisation,
@@ -102,21 +104,27 @@ def _boundary_wedges(mesh: CutMesh):
     return np.array(wa, dtype=np.int64), np.array(wb, dtype=np.int64), coordinate
 
 
-def anchor_wedge(mesh: CutMesh) -> int:
-    """A wedge whose (U, V) the integer grid fixes anyway: a singular vertex's, else a
-    boundary corner's, else a boundary vertex's (else wedge 0)."""
-    if mesh.singular.size:
-        v = int(mesh.singular[0])
+def anchor_wedges(mesh: CutMesh) -> np.ndarray:
+    """Per connected component of the mesh a wedge whose (U, V) the integer grid fixes
+    anyway: a singular vertex's, else a boundary corner's, else a boundary vertex's (else
+    the component's first wedge)."""
+    count, label = triangle_components(mesh.faces, mesh.cells.shape[0])
+    wedge_component = np.empty(mesh.num_wedges, dtype=np.int64)
+    wedge_component[mesh.corners] = label[:, None]
+    candidates = []
+    for v in mesh.singular:
         face = int(np.flatnonzero(np.any(mesh.cells == v, axis=1))[0])
-        return wedge_of(mesh, face, v)
+        candidates.append(wedge_of(mesh, face, int(v)))
     wa, wb, coordinate = _boundary_wedges(mesh)
-    if wa.size == 0:
-        return 0
     constrained = np.zeros((mesh.num_wedges, 2), dtype=bool)
     constrained[wa, coordinate] = True
     constrained[wb, coordinate] = True
-    corners = np.flatnonzero(constrained.all(axis=1))
-    return int(corners[0]) if corners.size else int(wa[0])
+    candidates += list(np.flatnonzero(constrained.all(axis=1))) + list(wa)
+    candidates += list(first_wedges(mesh))
+    anchors = {}
+    for w in candidates:
+        anchors.setdefault(int(wedge_component[w]), int(w))
+    return np.array([anchors[c] for c in range(count)], dtype=np.int64)
 
 
 def interior_angles(mesh: CutMesh) -> np.ndarray:
@@ -285,8 +293,7 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     stays invalid: the grid is too coarse for the field's singularities or its narrow
     parts at this scale.
     """
-    anchor = anchor_wedge(mesh)
-    AT, b, T = least_squares_system(mesh, scale, anchor)
+    AT, b, T = least_squares_system(mesh, scale, anchor_wedges(mesh))
     N = (AT.T @ AT).tocsc()
     lu = spla.splu(N)
     y0 = lu.solve(AT.T @ b)

@@ -15,7 +15,8 @@ the gradient of a map, ∇U = u/|u|², ∇V = v/|v|². So (U, V), P1 on the cut 
   of every cut edge;
 * boundary alignment: along a boundary edge the coordinate whose branch crosses the edge
   (the branch more normal to it) is constant;
-* U = V = 0 at one wedge (the map is defined up to a translation).
+* U = V = 0 at one wedge of every connected component (the map is defined up to a
+  translation of each).
 
 The equality constraints are eliminated (sparse Gaussian elimination with substitution:
 every constraint has four or two ±1 terms, and redundant ones — around a closed loop of
@@ -29,12 +30,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ufl_frames.param.cut import CutMesh
+from ufl_frames.param.cut import CutMesh, triangle_components
 
 __all__ = ["Parametrisation", "boundary_coordinates", "gradients", "integrate",
            "least_squares_system", "parametrisation", "quarter_turn", "scale_for_quad_count",
            "scale_for_quad_size", "targets", "unfold", "weighted_solve", "wedge_of", "folded",
-           "angle_sums", "invalid", "miswound"]
+           "angle_sums", "invalid", "miswound", "first_wedges"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -102,7 +103,14 @@ def scale_for_quad_size(mesh: CutMesh, quad_size: float) -> float:
     return float(np.dot(density, 0.5 * (mesh.l1 + mesh.l2)) / density.sum() / quad_size)
 
 
-def _constraints(mesh: CutMesh, anchor: int = 0) -> list[dict]:
+def first_wedges(mesh: CutMesh) -> np.ndarray:
+    """One wedge per connected component of the mesh: its first triangle's first corner."""
+    count, label = triangle_components(mesh.faces, mesh.cells.shape[0])
+    first = np.array([np.flatnonzero(label == c)[0] for c in range(count)], dtype=np.int64)
+    return mesh.corners[first, 0]
+
+
+def _constraints(mesh: CutMesh, anchor=None) -> list[dict]:
     """Sparse rows {scalar unknown: coefficient} = 0 (unknown 2w + c: coordinate c of wedge w)."""
     rows = []
     edges, faces = mesh.edges, mesh.faces
@@ -133,8 +141,9 @@ def _constraints(mesh: CutMesh, anchor: int = 0) -> list[dict]:
         f = int(faces[e, 0])
         a, b = int(edges[e, 0]), int(edges[e, 1])
         rows.append({2 * wedge(f, a) + c: 1.0, 2 * wedge(f, b) + c: -1.0})
-    rows.append({2 * anchor: 1.0})
-    rows.append({2 * anchor + 1: 1.0})
+    for w in np.atleast_1d(first_wedges(mesh) if anchor is None else anchor):
+        rows.append({2 * int(w): 1.0})
+        rows.append({2 * int(w) + 1: 1.0})
     return rows
 
 
@@ -202,10 +211,21 @@ class Parametrisation:
         return self.uv[self.mesh.corners]
 
 
-def least_squares_system(mesh: CutMesh, scale: float = 1.0, anchor: int = 0):
-    """The seamless problem in the free unknowns y: (A T, b, T), x = T y the wedge values
-    (x[2w + c]: coordinate c of wedge w) satisfying the seams, the boundary alignment and
-    (U, V) = 0 at wedge ``anchor``, and A x − b the area-weighted misfit rows."""
+def least_squares_system(mesh: CutMesh, scale: float = 1.0, anchor=None):
+    """The seamless problem in the free unknowns y.
+
+    Args:
+        mesh: the cut mesh with its combed field.
+        scale: the global scale s.
+        anchor: the wedge, or one wedge per connected component, where (U, V) = 0
+            (default :func:`first_wedges`): the map is defined up to a translation of
+            every component.
+
+    Returns:
+        (A T, b, T): x = T y the wedge values (x[2w + c]: coordinate c of wedge w)
+        satisfying the seams, the boundary alignment and the anchors, and A x − b the
+        area-weighted misfit rows.
+    """
     area, grad = gradients(mesh.x, mesh.cells)
     target_u, target_v = targets(mesh, scale)
     m, count = mesh.cells.shape[0], 2 * mesh.num_wedges
@@ -329,10 +349,11 @@ def unfold(mesh: CutMesh, AT, b, T, y, scale: float, F_fixed=None, d=None):
     return p, int(np.count_nonzero(weight > 1))
 
 
-def integrate(mesh: CutMesh, scale: float = 1.0, anchor: int = 0,
+def integrate(mesh: CutMesh, scale: float = 1.0, anchor=None,
               unfold_folds: bool = True) -> Parametrisation:
     """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``, zero
-    at wedge ``anchor``; with ``unfold_folds``, folded triangles re-weighted (:func:`unfold`)."""
+    at the ``anchor`` wedges (:func:`least_squares_system`); with ``unfold_folds``,
+    folded triangles re-weighted (:func:`unfold`)."""
     AT, b, T = least_squares_system(mesh, scale, anchor)
     y = spla.spsolve((AT.T @ AT).tocsc(), AT.T @ b)
     if unfold_folds:
