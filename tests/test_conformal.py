@@ -20,7 +20,7 @@ from ufl_frames.fem import energy
 from ufl_frames.fem.conformal import conformal_field
 from ufl_frames.fem.constraints import lumped_mass
 from ufl_frames.frames2d import odeco
-from ufl_frames.mesh import annulus, piano
+from ufl_frames.mesh import annulus, load, piano
 from ufl_frames.pipeline import FrameField
 
 COMM = MPI.COMM_WORLD
@@ -121,7 +121,7 @@ def test_two_components_each_get_their_scale(tmp_path):
     if COMM.rank == 0:
         path.write_text(TWO_ANNULI)
     COMM.barrier()
-    domain = geometry.load(COMM, path, mesh_size=0.05)
+    domain = load(COMM, path, mesh_size=0.05)
     V = energy.frame_space(domain.mesh)
 
     def frames(x):
