@@ -265,3 +265,33 @@ def test_two_components_give_two_exact_grids():
     left = quads.points[:, 0] < 2.5
     assert np.unique(np.round(quads.points[left, 0] * 4, 6)).size == 9
     assert np.unique(np.round(quads.points[~left, 1] * 4, 6)).size == 7
+
+
+def test_one_factorisation_solves_every_weighted_constrained_map():
+    """The quantisation's maps (rounded integers fixed, folded triangles weighted up) come
+    from one factorisation and the Woodbury identity; the same minimiser, factorised
+    anew with the weights (``seamless.weighted_solve``), agrees to round-off."""
+    x, cells = grid(12, 12, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, pair_field(x, (-0.4, 0.1), (0.45, -0.2)))
+    system = seamless.SeamlessSystem(mesh, 2.0, quantise.anchor_wedges(mesh))
+    F, kinds = quantise.integer_functionals(mesh)
+    Fy = (F @ system.T).tocsr()
+    distinct = quantise._distinct_rows(Fy)
+    F_all, kinds = Fy[distinct], kinds[distinct]
+    G_all = quantise._covariance(system.lu, F_all)
+    phase = np.array([quantise._PHASE[k] for k in kinds])
+    fixed, target = quantise._greedy(F_all @ system.y0, G_all, phase)  # independent rows
+    Fk, G = F_all[fixed], G_all[np.ix_(fixed, fixed)]
+    d = target[fixed] + np.arange(fixed.size) % 2
+    assert fixed.size >= 4
+    rng = np.random.default_rng(3)
+    weight = np.ones(cells.shape[0])
+    weight[rng.choice(cells.shape[0], 25, replace=False)] = 10.0 ** rng.integers(1, 4, 25)
+    for w in (None, weight):
+        direct = seamless.weighted_solve(system.AT, system.b,
+                                         np.ones(cells.shape[0]) if w is None else w, Fk, d)
+        y = system.solve(Fk, G, d, w)
+        assert np.allclose(Fk @ y, d, atol=1e-9)
+        assert np.abs(y - direct).max() < 1e-8 * np.abs(direct).max()
+    assert np.allclose(system.solve(weight=weight),
+                       seamless.weighted_solve(system.AT, system.b, weight), atol=1e-10)

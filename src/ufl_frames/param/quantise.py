@@ -30,18 +30,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ufl_frames.param.cut import CutMesh, triangle_components
 from ufl_frames.param.seamless import (
     Parametrisation,
+    SeamlessSystem,
     boundary_coordinates,
     first_wedges,
     invalid,
-    least_squares_system,
-    parametrisation,
     quarter_turn,
-    unfold,
     wedge_of,
 )
 
@@ -287,38 +284,34 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
 
     Where the rounded map folds (a triangle with det ∇(U, V) ≤ 0), the folded triangles
     and their neighbours are weighted up and the map solved again with the same integers
-    (:func:`~ufl_frames.param.seamless.unfold`); where it still folds, or winds a full
-    turn wrong around a vertex (:func:`~ufl_frames.param.seamless.invalid`), quantities
-    are rounded the other way (:func:`_repair`). Raises :class:`QuantisationError` if it
-    stays invalid: the grid is too coarse for the field's singularities or its narrow
-    parts at this scale.
+    (:meth:`~ufl_frames.param.seamless.SeamlessSystem.unfold`); where it still folds, or
+    winds a full turn wrong around a vertex (:func:`~ufl_frames.param.seamless.invalid`),
+    quantities are rounded the other way (:func:`_repair`). All with one factorisation
+    (:class:`~ufl_frames.param.seamless.SeamlessSystem`). Raises
+    :class:`QuantisationError` if it stays invalid: the grid is too coarse for the
+    field's singularities or its narrow parts at this scale.
     """
-    AT, b, T = least_squares_system(mesh, scale, anchor_wedges(mesh))
-    N = (AT.T @ AT).tocsc()
-    lu = spla.splu(N)
-    y0 = lu.solve(AT.T @ b)
-    seamless = parametrisation(mesh, (T @ y0).reshape(-1, 2), scale)
+    system = SeamlessSystem(mesh, scale, anchor_wedges(mesh))
+    seamless = system.param(system.y0)
     F, kinds = integer_functionals(mesh)
-    Fy = (F @ T).tocsr()
+    Fy = (F @ system.T).tocsr()
     keep = _distinct_rows(Fy)
     Fk = Fy[keep]
     rounded, max_shift, repaired = 0, 0.0, 0
     fixed = np.zeros(0, dtype=np.int64)
     if keep.size:
-        G = _covariance(lu, Fk)
-        mean = Fk @ y0
+        G = _covariance(system.lu, Fk)
+        mean = Fk @ system.y0
         phase = np.array([_PHASE[kind] for kind in kinds[keep]])
         fixed, target = _greedy(mean, G, phase)
         rounded = int(fixed.size)
     if fixed.size:
-        max_shift = float(np.abs(Fk[fixed] @ y0 - target[fixed]).max())
-        system = (AT, b, T, scale, lu, y0)
-        param, response = _rounded_map(mesh, system, Fk[fixed], target[fixed])
+        max_shift = float(np.abs(Fk[fixed] @ system.y0 - target[fixed]).max())
+        param = system.unfold(Fk[fixed], G[np.ix_(fixed, fixed)], target[fixed])
         if invalid(param).any():
-            param, repaired = _repair(mesh, system, F, (Fk, mean, G, phase), fixed, target,
-                                      param, response)
+            param, repaired = _repair(system, F, (Fk, mean, G, phase), fixed, target, param)
     else:
-        param, _ = unfold(mesh, AT, b, T, y0, scale)
+        param = system.unfold()
     values = F @ param.uv.ravel()
     off = np.abs(values - np.rint(values))
     if off.size and off.max() > INTEGER_TOLERANCE:
@@ -333,25 +326,14 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
             f"the integer-grid map folds, collapses or winds wrong around {bad} of "
             f"{mesh.cells.shape[0]} triangles at this quad size: the grid is too coarse for "
             "the field's singularities or narrow parts; take a smaller quad size")
-    increase = (_misfit_energy(param) - _misfit_energy(seamless)) / max(float(b @ b), 1e-300)
+    increase = ((_misfit_energy(param) - _misfit_energy(seamless))
+                / max(float(system.b @ system.b), 1e-300))
     return IntegerGridMap(param=param, seamless=seamless, functionals=F, values=values,
                           kinds=kinds, rounded=rounded, max_shift=max_shift,
                           energy_increase=increase, repaired=repaired)
 
 
-def _rounded_map(mesh, system, F_fixed, d):
-    """The map with the integers F_fixed y = d (unfolded: :func:`~ufl_frames.param.seamless.
-    unfold`), and its response ∂y/∂d."""
-    AT, b, T, scale, lu, y0 = system
-    # the constrained minimiser is y0 − Z (F Z)⁻¹ (F y0 − d), Z = N⁻¹ Fᵀ
-    Z = lu.solve(F_fixed.T.toarray())
-    response = Z @ np.linalg.inv(F_fixed @ Z)
-    y = y0 - response @ (F_fixed @ y0 - d)
-    param, _ = unfold(mesh, AT, b, T, y, scale, F_fixed, d)
-    return param, response
-
-
-def _repair(mesh, system, F, rounding, fixed, target, param, response):
+def _repair(system: SeamlessSystem, F, rounding, fixed, target, param):
     """Move by one, to the other neighbouring integer and then away from it, each of the
     :data:`REPAIR_CANDIDATES` fixed quantities the invalid triangles (folded, or around a
     vertex the map winds wrong: :func:`~ufl_frames.param.seamless.invalid`) depend on most
@@ -361,14 +343,12 @@ def _repair(mesh, system, F, rounding, fixed, target, param, response):
     best trial if it has fewer invalid triangles and leaves every quantity an integer.
     Returns the map and the number of rounds that moved one."""
     Fk, mean, G, phase = rounding
-    T = system[2]
     repaired = 0
     for _ in range(REPAIRS):
         bad = invalid(param)
         if not bad.any():
             break
-        rows = (2 * mesh.corners[bad].reshape(-1, 1) + np.arange(2)).ravel()
-        influence = np.abs(T[rows] @ response).sum(axis=0)
+        influence = system.influence(Fk[fixed], G[np.ix_(fixed, fixed)], np.flatnonzero(bad))
         trials = []
         for k in np.argsort(-influence, kind="stable")[:REPAIR_CANDIDATES]:
             i = fixed[k]
@@ -388,19 +368,19 @@ def _repair(mesh, system, F, rounding, fixed, target, param, response):
                     trial_fixed, trial_target = _greedy(mean, G, phase, trial)
                 except QuantisationError:
                     continue
-            candidate, trial_response = _rounded_map(mesh, system, Fk[trial_fixed],
-                                                     trial_target[trial_fixed])
+            candidate = system.unfold(Fk[trial_fixed], G[np.ix_(trial_fixed, trial_fixed)],
+                                      trial_target[trial_fixed])
             values = F @ candidate.uv.ravel()
             if np.abs(values - np.rint(values)).max(initial=0.0) > INTEGER_TOLERANCE:
                 continue
             count = int(np.count_nonzero(invalid(candidate)))
             if count < int(np.count_nonzero(bad)) and (best is None or count < best[0]):
-                best = (count, trial_fixed, trial_target, candidate, trial_response)
+                best = (count, trial_fixed, trial_target, candidate)
                 if count == 0:
                     break
         if best is None:
             break
-        _, fixed, target, param, response = best
+        _, fixed, target, param = best
         repaired += 1
     return param, repaired
 

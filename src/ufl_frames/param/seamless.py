@@ -32,10 +32,11 @@ import scipy.sparse.linalg as spla
 
 from ufl_frames.param.cut import CutMesh, triangle_components
 
-__all__ = ["Parametrisation", "boundary_coordinates", "gradients", "integrate",
-           "least_squares_system", "parametrisation", "quarter_turn", "scale_for_quad_count",
-           "scale_for_quad_size", "targets", "unfold", "weighted_solve", "wedge_of", "folded",
-           "angle_sums", "invalid", "miswound", "first_wedges"]
+__all__ = ["Parametrisation", "SeamlessSystem", "angle_sums", "boundary_coordinates",
+           "first_wedges", "folded", "gradients", "integrate", "invalid",
+           "least_squares_system", "miswound", "parametrisation", "quarter_turn",
+           "scale_for_quad_count", "scale_for_quad_size", "targets", "wedge_of",
+           "weighted_solve"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -260,7 +261,8 @@ def parametrisation(mesh: CutMesh, uv: np.ndarray, scale: float) -> Parametrisat
 
 #: A triangle whose image is this much smaller than the median one's counts as collapsed.
 COLLAPSED = 1e-6
-#: Rounds of re-weighting folded triangles (:func:`unfold`), and the factor of each.
+#: Rounds of re-weighting folded triangles (:meth:`SeamlessSystem.unfold`), and the factor
+#: of each.
 REWEIGHTINGS, REWEIGHT_FACTOR = 4, 10.0
 
 
@@ -317,9 +319,14 @@ def invalid(p: Parametrisation) -> np.ndarray:
     return folded(p) | miswound(p)[p.mesh.cells].any(axis=1)
 
 
+#: Re-weighted misfit rows up to which a weighted solve updates the one factorisation
+#: (:class:`SeamlessSystem`); beyond, it factorises the weighted matrix.
+WOODBURY_ROWS = 1000
+
+
 def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarray:
     """argmin Σ_f w_f (misfit of triangle f)² over y, subject to F_fixed y = d if given
-    (``weight`` per triangle; AT, b of :func:`least_squares_system`)."""
+    (``weight`` per triangle; AT, b of :func:`least_squares_system`), factorised anew."""
     row_weight = np.sqrt(np.repeat(weight, 4))
     WA = sp.diags(row_weight) @ AT
     lu = spla.splu((WA.T @ WA).tocsc())
@@ -331,31 +338,100 @@ def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarra
     return y0 - Z @ mu
 
 
-def unfold(mesh: CutMesh, AT, b, T, y, scale: float, F_fixed=None, d=None):
-    """Re-weight the folded triangles and their neighbours (× :data:`REWEIGHT_FACTOR`, at
-    most :data:`REWEIGHTINGS` rounds) and solve again, until nothing folds: a fold is where
-    the least squares traded orientation for misfit, and a larger weight there buys it
-    back. Returns the :class:`Parametrisation` and the number of triangles re-weighted."""
-    p = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
-    weight = np.ones(mesh.cells.shape[0])
-    for _ in range(REWEIGHTINGS):
-        bad = folded(p)
-        if not bad.any():
-            break
-        near = np.isin(mesh.cells, mesh.cells[bad]).any(axis=1)
-        weight[near] *= REWEIGHT_FACTOR
-        y = weighted_solve(AT, b, weight, F_fixed, d)
-        p = parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
-    return p, int(np.count_nonzero(weight > 1))
+class SeamlessSystem:
+    """The seamless least squares (:func:`least_squares_system`) in the free unknowns y,
+    factorised once, with (U, V) = 0 at the ``anchor`` wedges: every map the
+    quantisation tries (rounded integers F_S y = d, folded triangles weighted up) is solved
+    with that one factorisation of N = (AT)ᵀ(AT).
+
+    The weighted normal matrix N_w = N + A_Rᵀ D A_R differs from N in the few rows R of
+    the re-weighted triangles (D = diag(w − 1)), so by the Woodbury identity
+    N_w⁻¹ v = N⁻¹ v − B M⁻¹ A_R N⁻¹ v with B = N⁻¹ A_Rᵀ and M = D⁻¹ + A_R B; and the
+    constrained minimiser is y = y_w − N_w⁻¹ F_Sᵀ μ, (F_S N_w⁻¹ F_Sᵀ) μ = F_S y_w − d, where
+    F_S N⁻¹ F_Sᵀ is the covariance G the greedy rounding computed already. A map costs
+    |R| + 2 back-substitutions and dense algebra of the size of S and R, instead of a
+    factorisation and |S| back-substitutions (a factorisation where R is large: a map
+    folded almost everywhere).
+    """
+
+    def __init__(self, mesh: CutMesh, scale: float, anchor=None):
+        self.mesh, self.scale = mesh, scale
+        self.AT, self.b, self.T = least_squares_system(mesh, scale, anchor)
+        self.lu = spla.splu((self.AT.T @ self.AT).tocsc())
+        self.rhs = self.AT.T @ self.b
+        self.y0 = self.lu.solve(self.rhs)
+
+    def solve(self, F=None, G=None, d=None, weight=None) -> np.ndarray:
+        """argmin Σ_f w_f (misfit of triangle f)² subject to F y = d.
+
+        Args:
+            F: the fixed functionals (S, free) in y, or None.
+            G: F N⁻¹ Fᵀ (the unweighted covariance of those functionals).
+            d: their integers.
+            weight: per triangle (m,), or None for 1 everywhere.
+
+        Returns:
+            The free unknowns y.
+        """
+        rows = np.zeros(0, dtype=np.int64)
+        if weight is not None:
+            rows = np.flatnonzero(np.repeat(weight, 4) != 1.0)
+        if rows.size > min(WOODBURY_ROWS, self.y0.size // 4):  # a factorisation is cheaper
+            return weighted_solve(self.AT, self.b, weight, F, d)
+        if rows.size:
+            A_R = self.AT[rows]
+            extra = np.repeat(weight, 4)[rows] - 1.0
+            B = self.lu.solve(A_R.T.toarray())
+            M = np.diag(1.0 / extra) + A_R @ B
+            rhs = self.rhs + A_R.T @ (extra * self.b[rows])
+
+            def inverse(v):  # N_w⁻¹ v
+                z = self.lu.solve(v)
+                return z - B @ np.linalg.solve(M, A_R @ z)
+        else:
+            rhs, inverse = self.rhs, self.lu.solve
+        y = inverse(rhs) if rows.size else self.y0
+        if F is None or F.shape[0] == 0:
+            return y
+        Gw = G
+        if rows.size:
+            FB = F @ B
+            Gw = G - FB @ np.linalg.solve(M, FB.T)
+        mu = np.linalg.solve(Gw, F @ y - d)
+        return y - inverse(np.asarray(F.T @ mu).ravel())
+
+    def param(self, y) -> Parametrisation:
+        return parametrisation(self.mesh, (self.T @ y).reshape(-1, 2), self.scale)
+
+    def unfold(self, F=None, G=None, d=None) -> Parametrisation:
+        """The map with F y = d, its folded triangles and their neighbours weighted up
+        (× :data:`REWEIGHT_FACTOR`, at most :data:`REWEIGHTINGS` rounds) until nothing
+        folds: a fold is where the least squares traded orientation for misfit, and a
+        larger weight there buys it back."""
+        p = self.param(self.solve(F, G, d))
+        weight = np.ones(self.mesh.cells.shape[0])
+        for _ in range(REWEIGHTINGS):
+            bad = folded(p)
+            if not bad.any():
+                break
+            near = np.isin(self.mesh.cells, self.mesh.cells[bad]).any(axis=1)
+            weight[near] *= REWEIGHT_FACTOR
+            p = self.param(self.solve(F, G, d, weight))
+        return p
+
+    def influence(self, F, G, triangles: np.ndarray) -> np.ndarray:
+        """Per fixed functional (rows of F) how much the wedge values of ``triangles``
+        move per unit of its integer: Σ |∂x/∂d| over their corners' coordinates."""
+        rows = (2 * self.mesh.corners[triangles].reshape(-1, 1) + np.arange(2)).ravel()
+        # ∂y/∂d = N⁻¹ Fᵀ G⁻¹, so T_rows ∂y/∂d = (N⁻¹ T_rowsᵀ)ᵀ Fᵀ G⁻¹
+        Z = self.lu.solve(self.T[rows].T.toarray())
+        return np.abs(np.linalg.solve(G, F @ Z).T).sum(axis=0)
 
 
 def integrate(mesh: CutMesh, scale: float = 1.0, anchor=None,
               unfold_folds: bool = True) -> Parametrisation:
     """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``, zero
     at the ``anchor`` wedges (:func:`least_squares_system`); with ``unfold_folds``,
-    folded triangles re-weighted (:func:`unfold`)."""
-    AT, b, T = least_squares_system(mesh, scale, anchor)
-    y = spla.spsolve((AT.T @ AT).tocsc(), AT.T @ b)
-    if unfold_folds:
-        return unfold(mesh, AT, b, T, y, scale)[0]
-    return parametrisation(mesh, (T @ y).reshape(-1, 2), scale)
+    folded triangles re-weighted (:meth:`SeamlessSystem.unfold`)."""
+    system = SeamlessSystem(mesh, scale, anchor)
+    return system.unfold() if unfold_folds else system.param(system.y0)
