@@ -11,17 +11,23 @@ linearisation,
 .. math::  D^2 r_i[\delta q, w] = C_{ijkl}\,(\delta q_l\,\partial_k w_j
            + w_l\,\partial_k \delta q_j).
 
-On P1 frame fields ∇q is constant on a triangle and q linear, so J and r are linear there
-and the integrands quadratic: the three edge midpoints integrate them exactly. FFCx
-expands the UFL forms (:func:`ufl_frames.fem.energy.gauss_newton_form`, the second
-derivative of :func:`~ufl_frames.fem.energy.integrability_energy_form`) into one weight
-per pair of (component, derivative) of the test and the trial function, about 10⁴ flops a
-triangle; written in J, the same matrix costs about 2·10³ (2 × 15 entries of J per point,
-then Jᵀ J). This module writes both kernels in C from the bracket table
-(:data:`~ufl_frames.frames2d.bracket.BRACKET_ENTRIES`), compiles them with cffi as FFCx
-does its own (once, cached beside FFCx's), and gives DOLFINx forms made of them: the
-same matrices as the UFL forms (tested to round-off), assembled by DOLFINx into PETSc
-in 0.21 / 0.30 s instead of 0.46 / 0.48 s at 10⁵ triangles (Gauss–Newton / exact).
+On P1 frame fields ∇q is constant on a cell and q linear, so J and r are linear there
+and the integrands quadratic: a rule of degree 2 (on a triangle the three edge midpoints)
+integrates them exactly. FFCx expands the UFL forms
+(:func:`ufl_frames.fem.energy.gauss_newton_form`, the second derivative of
+:func:`~ufl_frames.fem.energy.integrability_energy_form`) into one weight per pair of
+(component, derivative) of the test and the trial function; written in J, the same matrix
+costs several times fewer flops (2 × 15 entries of J per point on a triangle, then Jᵀ J).
+This module writes both kernels in C, compiles them with cffi as FFCx does its own (once,
+cached beside FFCx's), and gives DOLFINx forms made of them: the same matrices as the UFL
+forms (tested to round-off).
+
+The C code is generated from a frame algebra (:mod:`ufl_frames.frames2d.algebra`, the 2D
+:data:`~ufl_frames.frames2d.algebra.ALGEBRA` unless one is given): its bracket table, its
+number of coefficients a vertex, its dimension and its cell's vertex count are the
+template's parameters, and the cell's gradients and quadrature rule come from this
+module's table of cells (the triangle's). A 3D algebra (15 coefficients on tetrahedra)
+needs its table and a tetrahedron entry there.
 """
 
 import functools
