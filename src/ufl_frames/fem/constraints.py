@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
+from ufl_frames.frames2d.algebra import ALGEBRA, FrameAlgebra  # noqa: E402
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT  # noqa: E402
 
 
@@ -61,7 +61,7 @@ class FrameConstraints:
     isotropic: bool
     comm: MPI.Comm
     max_aspect: float | None = None
-    algebra: object = field(default=ALGEBRA, repr=False)
+    algebra: FrameAlgebra = field(default=ALGEBRA, repr=False)
 
     @property
     def free(self) -> np.ndarray:
@@ -124,7 +124,7 @@ def frame_constraints(
     isotropic: bool = False,
     max_aspect: float | None = DEFAULT_MAX_ASPECT,
     boundary_angles: np.ndarray | None = None,
-    algebra=ALGEBRA,
+    algebra: FrameAlgebra = ALGEBRA,
 ) -> FrameConstraints:
     """Boundary rows fixed to their normals, and lumped-mass weights, for the frame space
     ``V`` (collective).
@@ -198,9 +198,17 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray,
     (:attr:`Fixed.PINNED`): orientation held at its current value, lengths free. The
     singularities then stay where the initial field put them — the solver can neither
     move nor annihilate them — which is the intended use of the MBO field as a template
-    (note §3, "Initial condition").
-    With ``radius`` > 0 every vertex closer than that to a singular triangle's
-    barycentre is held too (collective).
+    (note §3, "Initial condition"). Collective.
+
+    Args:
+        V: The P1 frame space.
+        constraints: The constraints to add to (their fixed rows stay as they are).
+        q: The local rows (N, count) of the field whose singularities are pinned.
+        radius: With ``radius`` > 0 every vertex closer than that to a singular
+            triangle's barycentre is held too.
+
+    Returns:
+        ``constraints`` with the pinned rows fixed to their current orientation.
     """
     from ufl_frames.frames2d.singularities import triangle_indices
 

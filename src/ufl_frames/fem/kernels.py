@@ -462,9 +462,18 @@ def _build(name: str, source: str, cache: Path, path: Path, functions) -> None:
 def damped_gauss_newton_form(q: fem.Function, damping: fem.Constant,
                              inverse_area: fem.Constant, algebra=ALGEBRA) -> fem.Form:
     """The DOLFINx form of ∫ J[δq]·J[w] + λ (∇δq:∇w + δq·w/A) dx with the compiled kernel:
-    the matrix of ``energy.gauss_newton_form(q) + λ sobolev_form`` (λ = ``damping``, 1/A =
-    ``inverse_area``, both read at every assembly), over the cells this rank owns
-    (collective: compiles once). ``algebra``: the frame algebra of ``q``."""
+    the matrix of ``energy.gauss_newton_form(q) + λ sobolev_form``, over the cells this
+    rank owns.
+
+    Args:
+        q: The frame field.
+        damping: λ, read at every assembly.
+        inverse_area: 1/A, read at every assembly.
+        algebra: The frame algebra of ``q``.
+
+    Returns:
+        The compiled form (collective: compiles once).
+    """
     return _damped_form(q, damping, inverse_area, False, algebra)
 
 

@@ -6,7 +6,7 @@ algebra, :data:`ALGEBRA` (a :class:`FrameAlgebra2D`) unless told otherwise, and 
 from it the number of coefficients a vertex, the spatial dimension, the Lie bracket's
 table and the pointwise maps. A 3D algebra (a ``frames3d`` package: frames of three
 orthogonal branches, 15 spherical-harmonic coefficients of a fourth-order tensor on
-tetrahedra) plugs in by providing the same protocol:
+tetrahedra) plugs in by providing the same protocol (:class:`FrameAlgebra`):
 
 * ``count`` — coefficients per frame (5 here, 15 in 3D); every (N, count) array;
 * ``dim`` — the spatial dimension (2 here, 3 in 3D): ∇q is (count, dim);
@@ -32,13 +32,44 @@ stays there. Pure NumPy.
 """
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from ufl_frames.frames2d import aspect, odeco
 from ufl_frames.frames2d._bracket_table import BRACKET_ENTRIES
 
-__all__ = ["ALGEBRA", "FrameAlgebra2D"]
+__all__ = ["ALGEBRA", "FrameAlgebra", "FrameAlgebra2D"]
+
+
+class FrameAlgebra(Protocol):
+    """What a frame algebra provides (the module docstring says what each thing is)."""
+
+    count: int
+    dim: int
+    cell: str
+    cell_vertices: int
+    bracket_components: int
+    bracket_entries: tuple
+    tangent_columns: int
+    rotation_columns: tuple
+    anisotropy_columns: tuple
+
+    def frames_to_q(self, lengths, angles) -> np.ndarray: ...
+    def q_to_frames(self, q): ...
+    def orientation(self, q) -> np.ndarray: ...
+    def unit_frames(self, directions) -> np.ndarray: ...
+    def closest_unit_isotropic(self, q) -> np.ndarray: ...
+    def variety_residual(self, q) -> np.ndarray: ...
+    def project(self, q, isotropic=False, max_aspect=None) -> np.ndarray: ...
+    def project_aligned(self, q, directions, isotropic=False, max_aspect=None): ...
+    def tangent_basis(self, q, max_aspect=None, gradient=None, on_variety=False, held=None,
+                      only_held=False) -> np.ndarray: ...
+    def tangent_project(self, q, dq) -> np.ndarray: ...
+    def tangent_curvature(self, q, gradient, max_aspect=None, isotropic=False,
+                          active_gradient=None, active=None) -> np.ndarray: ...
+    def pushed_off_bound(self, q, direction, max_aspect) -> np.ndarray: ...
+    def aspect_bound(self, isotropic, max_aspect) -> float | None: ...
 
 
 @dataclass(frozen=True)
