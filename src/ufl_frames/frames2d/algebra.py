@@ -20,7 +20,8 @@ tetrahedra) plugs in by providing the same protocol (:class:`FrameAlgebra`):
   :meth:`tangent_basis`: all of them, those that rotate the frame (absent where its
   orientation is fixed) and those that change the lengths' ratios (absent for isotropic
   frames and, in the active set, at the aspect bound);
-* ``frames_to_q``, ``q_to_frames``, ``orientation`` (the directions a fixed row keeps),
+* ``frames_to_q``, ``q_to_frames`` (lengths and orientation: angles here, rotations in
+  3D), ``orientation`` (the directions a fixed row keeps),
   ``unit_frames``, ``closest_unit_isotropic`` (MBO's template), ``project`` (the closest
   frame, optionally isotropic and aspect-bounded), ``project_aligned`` (the closest frame
   with a given orientation), ``variety_residual``, ``tangent_basis``, ``tangent_project``,
