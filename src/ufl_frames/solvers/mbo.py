@@ -80,10 +80,10 @@ def mbo_frame_field(
     q = fem.Function(V, name="q")
     rows = q.x.array.reshape(-1, k)
     rows[constraints.fixed] = algebra.unit_frames(constraints.directions)
-    boundary_values = [fem.Function(S) for _ in range(k)]
-    for j, g in enumerate(boundary_values):
+    fixed_values = [fem.Function(S) for _ in range(k)]
+    for j, g in enumerate(fixed_values):
         g.x.array[:] = rows[row_of, j]
-    bcs = [fem.dirichletbc(g, fixed_dofs) for g in boundary_values]
+    bcs = [fem.dirichletbc(g, fixed_dofs) for g in fixed_values]
 
     tau = fem.Constant(mesh, PETSc.ScalarType(1.0))
     u, w = ufl.TrialFunction(S), ufl.TestFunction(S)
