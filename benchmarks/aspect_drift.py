@@ -92,7 +92,7 @@ def probe(field, trace: dict, first: int) -> list[str]:
         return problem.energy()
 
     def unbounded_energy(rows):
-        problem.q.x.array[:] = unbounded.retract(rows).ravel()
+        problem.q.x.array[:] = unbounded.retraction(rows).ravel()
         return problem.energy()
 
     lines = []

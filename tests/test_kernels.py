@@ -159,3 +159,44 @@ def test_reduced_form_rejects_a_basis_of_the_wrong_shape():
     space = fem.functionspace(mesh, ("Lagrange", 1, (3,)))
     with pytest.raises(ValueError, match="tangent basis"):
         kernels.reduced_model_form(q, basis, space, constant, constant)
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
+def test_kernels_of_another_algebra_equal_its_ufl_forms(exact):
+    """The C template takes its sizes from the algebra: with 7 coefficients a vertex and a
+    residual of 4 components (an arbitrary table) the kernels still give the matrices of
+    the UFL forms of that algebra, serial and in parallel."""
+    import dataclasses
+    import itertools
+
+    import dolfinx.mesh
+
+    from ufl_frames.frames2d.algebra import ALGEBRA
+
+    rng = np.random.default_rng(5)
+    entries = tuple((index, float(rng.uniform(-1, 1))) for index in
+                    itertools.product(range(4), range(7), range(2), range(7))
+                    if rng.random() < 0.2)
+    algebra = dataclasses.replace(ALGEBRA, count=7, bracket_components=4,
+                                  bracket_entries=entries)
+    mesh = dolfinx.mesh.create_unit_square(COMM, 6, 5)
+    V = energy.frame_space(mesh, algebra)
+    q = fem.Function(V)
+    x = V.tabulate_dof_coordinates()
+    q.x.array[:] = np.cos(np.arange(7)[None, :] + 3 * x[:, :1] - 2 * x[:, 1:2] ** 2).ravel()
+    damping = fem.Constant(mesh, PETSc.ScalarType(0.37))
+    inverse_area = fem.Constant(mesh, PETSc.ScalarType(1.0))
+    if exact:
+        H = energy.integrability_energy_form(q, algebra)
+        ufl_form = ufl.derivative(energy.gradient_form(H, q), q, ufl.TrialFunction(V))
+        compiled = kernels.damped_hessian_form(q, damping, inverse_area, algebra=algebra)
+    else:
+        ufl_form = energy.gauss_newton_form(q, algebra)
+        compiled = kernels.damped_gauss_newton_form(q, damping, inverse_area, algebra=algebra)
+    A = assembled(fem.form(ufl_form + damping * sobolev_form(V, 1.0)))
+    B = assembled(compiled)
+    scale = A.norm(PETSc.NormType.FROBENIUS)
+    A.axpy(-1.0, B, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert A.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    A.destroy()
+    B.destroy()

@@ -47,8 +47,8 @@ def test_mbo_annulus_frames(annulus_mesh):
         assert global_max(comm, np.abs(odeco.variety_residual(rows))) < 1e-8
 
         # Boundary: aligned with the normal used by the constraints, and with e_r.
-        b = constraints.boundary
-        psi = np.arctan2(constraints.normals[:, 1], constraints.normals[:, 0])
+        b = constraints.fixed
+        psi = np.arctan2(constraints.directions[:, 1], constraints.directions[:, 0])
         assert global_max(comm, angle_mod_quarter(t[b] - psi)) < 1e-8
         boundary_error = global_max(comm, angle_mod_quarter(t[b] - phi[b]))
         assert boundary_error < 0.1 * h  # polygonal boundary: edge normals vs e_r

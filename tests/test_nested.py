@@ -172,12 +172,12 @@ def test_pin_radius_holds_a_disk_around_each_singular_triangle():
     counts = []
     for radius in (0.0, 0.06, 0.15):
         held = pin_singularities(V, base, rows, radius=radius)
-        pinned = np.setdiff1d(held.boundary, base.boundary)
-        near = np.setdiff1d(np.flatnonzero(distance < radius), base.boundary)
+        pinned = np.setdiff1d(held.fixed, base.fixed)
+        near = np.setdiff1d(np.flatnonzero(distance < radius), base.fixed)
         assert np.isin(near, pinned).all()
         assert (distance[pinned] < max(radius, 2 * field.domain.mesh_size)).all()
         _, angles = odeco.q_to_frames(rows[pinned])
-        normals = held.normals[len(base.boundary):]
+        normals = held.directions[len(base.fixed):]
         np.testing.assert_allclose(normals, np.stack([np.cos(angles), np.sin(angles)], 1),
                                    atol=1e-14)
         counts.append(COMM.allreduce(int(np.count_nonzero(pinned < base.owned))))

@@ -62,7 +62,7 @@ def test_solver_reuses_the_mbo_constraints():
     fresh = frame_constraints(field.q.function_space, max_aspect=3.0,
                               boundary_angles=field.boundary_angles)
     assert reused.max_aspect == fresh.max_aspect == 3.0 and not reused.isotropic
-    for name in ("boundary", "normals", "weights"):
+    for name in ("fixed", "directions", "kind", "weights"):
         assert np.array_equal(getattr(reused, name), getattr(fresh, name)), name
 
 

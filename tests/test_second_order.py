@@ -74,7 +74,7 @@ def tangent(problem, rows, x):
     """
     n = problem.owned
     v = x.duplicate()
-    v.getArray()[:] = problem.manifold.tangent_project(problem.rows, rows)[
+    v.getArray()[:] = problem.manifold.projection(problem.rows, rows)[
         :n
     ].ravel()
     v.axpy(-v.dot(x) / x.dot(x), x)
@@ -284,7 +284,7 @@ def test_gauss_newton_maps_tangents_to_tangents_and_normals_to_mu(annulus_soluti
     rng = np.random.default_rng([11, COMM.rank])
     v = x.duplicate()
     raw = rng.standard_normal(problem.rows.shape)
-    normal = raw - problem.manifold.tangent_project(problem.rows, raw)
+    normal = raw - problem.manifold.projection(problem.rows, raw)
     v.getArray()[:] = normal[: problem.owned].ravel()
     assert abs(v.dot(x)) <= 1e-10 * v.norm() * x.norm()
     for vec in (v, x):

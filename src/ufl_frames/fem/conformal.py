@@ -42,7 +42,7 @@ from petsc4py import PETSc  # noqa: E402
 from ufl_frames.fem.components import dof_components  # noqa: E402
 from ufl_frames.fem.constraints import lumped_mass  # noqa: E402
 from ufl_frames.fem.energy import check_frame_function  # noqa: E402
-from ufl_frames.frames2d import odeco  # noqa: E402
+from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 
 __all__ = ["conformal_field", "conformal_forms", "direction_gradient"]
 
@@ -67,10 +67,11 @@ def conformal_forms(q, S):
 def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.Function:
     """The isotropic frame field with q's directions and the conformal scale l = e^{−φ}
     (module docstring); scaled to q's lumped L² norm (collective)."""
-    check_frame_function(q)
+    algebra = ALGEBRA  # 2D frames: the conformal scale is a planar construction
+    check_frame_function(q, algebra=algebra)
     V = q.function_space
     mesh = V.mesh
-    k = odeco.NUM_COEFFICIENTS
+    k = algebra.count
     S, to_blocked = V.sub(0).collapse()
     row_of = np.asarray(to_blocked, dtype=np.int64) // k
     a_ufl, L_ufl = conformal_forms(q, S)
@@ -109,7 +110,7 @@ def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.
                                f"-{options_prefix}ksp_type / -{options_prefix}pc_type")
     phi.x.scatter_forward()
     rows = q.x.array.reshape(-1, k)
-    _, angles = odeco.q_to_frames(rows)
+    _, angles = algebra.q_to_frames(rows)
     values = np.empty(rows.shape[0])
     values[row_of] = phi.x.array
     owned_rows = V.dofmap.index_map.size_local
@@ -120,7 +121,8 @@ def conformal_field(q: fem.Function, options_prefix: str = "conformal_") -> fem.
     shift = _per_component(mesh.comm, values[:owned_rows], label[:owned_rows], count, MPI.MAX)
     length = np.exp(-(values - shift[label]))  # ≤ 1 before the normalisation: no overflow
     result = fem.Function(V, name="q")
-    result.x.array[:] = odeco.frames_to_q(np.stack([length, length], axis=1), angles).ravel()
+    result.x.array[:] = algebra.frames_to_q(np.stack([length, length], axis=1),
+                                            angles).ravel()
     result.x.scatter_forward()
     mass = lumped_mass(V)[:owned_rows]
     out_rows = result.x.array.reshape(-1, k)

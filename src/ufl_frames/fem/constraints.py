@@ -1,5 +1,6 @@
-"""Where a P1 frame field is constrained: boundary and pinned vertices, their directions,
-the lumped masses of all vertices (note §3, "boundary conditions").
+"""Where a P1 frame field is constrained: the rows whose orientation is fixed (boundary and
+pinned vertices; later prescribed ones) with their directions, the lumped masses of all
+vertices (note §3, "boundary conditions").
 
 :func:`frame_constraints` finds them once per function space (local rows, owned and
 ghost, of ``q.x.array``); :class:`~ufl_frames.fem.manifold.FrameManifold` applies them
@@ -11,7 +12,8 @@ boundary edges (weighted by length): at a right-angled corner both edges give th
 same cross, at other corners the average is the cross closest to both.
 """
 
-from dataclasses import dataclass, replace
+import enum
+from dataclasses import dataclass, field, replace
 
 from ufl_frames.bootstrap import init_petsc
 
@@ -23,39 +25,70 @@ import numpy as np  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames.frames2d import odeco  # noqa: E402
-from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT, aspect_bound  # noqa: E402
+from ufl_frames.frames2d.algebra import ALGEBRA, FrameAlgebra  # noqa: E402
+from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT  # noqa: E402
+
+
+class Fixed(enum.IntEnum):
+    """Why a row's orientation is fixed (:attr:`FrameConstraints.kind`)."""
+
+    #: Aligned with the domain's boundary (its normal).
+    BOUNDARY = 0
+    #: Held at its current orientation (the vertices around a singularity).
+    PINNED = 1
+    #: Given by the user (an interface, an embedded curve).
+    PRESCRIBED = 2
 
 
 @dataclass(frozen=True)
 class FrameConstraints:
     """Where and how the frame field is constrained (local rows of the P1 space).
 
-    ``boundary`` are local vertex rows (owned and ghost) on the boundary, ``normals``
-    their unit normals (nb, 2); ``weights`` the lumped-mass weight of every local
-    row; ``owned`` the number of owned rows; ``isotropic`` whether l1 = l2 everywhere;
-    ``max_aspect`` the bound l_max/l_min of non-isotropic frames (None: unbounded; see
-    :mod:`ufl_frames.frames2d.aspect`).
+    ``fixed`` are the local vertex rows (owned and ghost) whose orientation is fixed,
+    ``directions`` the unit direction one branch keeps there (nf, dim) and ``kind`` why
+    (nf,) (:class:`Fixed`: boundary, pinned, prescribed); ``weights`` the lumped-mass
+    weight of every local row; ``owned`` the number of owned rows; ``isotropic`` whether
+    l1 = l2 everywhere; ``max_aspect`` the bound l_max/l_min of non-isotropic frames (None:
+    unbounded; see :mod:`ufl_frames.frames2d.aspect`); ``algebra`` the frame algebra of
+    the field (:data:`~ufl_frames.frames2d.algebra.ALGEBRA`: 2D frames).
     """
 
-    boundary: np.ndarray
-    normals: np.ndarray
+    fixed: np.ndarray
+    directions: np.ndarray
+    kind: np.ndarray
     weights: np.ndarray
     owned: int
     isotropic: bool
     comm: MPI.Comm
     max_aspect: float | None = None
+    algebra: FrameAlgebra = field(default=ALGEBRA, repr=False)
 
     @property
-    def interior(self) -> np.ndarray:
+    def free(self) -> np.ndarray:
+        """The local rows whose orientation is free (not :attr:`fixed`)."""
         mask = np.ones(self.weights.size, dtype=bool)
-        mask[self.boundary] = False
+        mask[self.fixed] = False
         return np.flatnonzero(mask)
+
+    def fixed_as(self, kind: Fixed) -> np.ndarray:
+        """The fixed rows of one ``kind``, e.g. ``Fixed.BOUNDARY``."""
+        return self.fixed[self.kind == kind]
+
+    def with_fixed(self, rows: np.ndarray, directions: np.ndarray,
+                   kind: Fixed) -> "FrameConstraints":
+        """These constraints with ``rows`` (not fixed yet) fixed to ``directions``."""
+        return replace(
+            self,
+            fixed=np.concatenate([self.fixed, rows]),
+            directions=np.concatenate([self.directions, directions]),
+            kind=np.concatenate([self.kind, np.full(rows.size, kind, dtype=np.int8)]),
+        )
 
     def for_frames(self, isotropic: bool, max_aspect: float | None) -> "FrameConstraints":
         """The same rows and directions for isotropic or general frames, the aspect bound
         set by its one rule (:func:`~ufl_frames.frames2d.aspect.aspect_bound`)."""
-        return replace(self, isotropic=isotropic, max_aspect=aspect_bound(isotropic, max_aspect))
+        return replace(self, isotropic=isotropic,
+                       max_aspect=self.algebra.aspect_bound(isotropic, max_aspect))
 
 
 def _vertex_rows_of_facets(V, facets):
@@ -78,11 +111,12 @@ def _vertex_rows_of_facets(V, facets):
 def lumped_mass(V) -> np.ndarray:
     """The lumped mass ∫ φ_v dx of every local vertex row (owned and ghost) of the frame
     space ``V``, read off the first component of the blocked space (collective)."""
-    ones = ufl.as_vector([1.0] + [0.0] * (odeco.NUM_COEFFICIENTS - 1))
+    count = V.dofmap.index_map_bs
+    ones = ufl.as_vector([1.0] + [0.0] * (count - 1))
     lumped = fem.assemble_vector(fem.form(ufl.inner(ones, ufl.TestFunction(V)) * ufl.dx))
     lumped.scatter_reverse(dolfinx.la.InsertMode.add)
     lumped.scatter_forward()
-    return lumped.array.reshape(-1, odeco.NUM_COEFFICIENTS)[:, 0].copy()
+    return lumped.array.reshape(-1, count)[:, 0].copy()
 
 
 def frame_constraints(
@@ -90,13 +124,26 @@ def frame_constraints(
     isotropic: bool = False,
     max_aspect: float | None = DEFAULT_MAX_ASPECT,
     boundary_angles: np.ndarray | None = None,
+    algebra: FrameAlgebra = ALGEBRA,
 ) -> FrameConstraints:
-    """Boundary rows, their normals and lumped-mass weights for the frame space ``V``.
+    """Boundary rows fixed to their normals, and lumped-mass weights, for the frame space
+    ``V`` (collective).
 
     The cross at a boundary vertex is aligned with the mesh's boundary edges (module
-    docstring), or, where ``boundary_angles`` (one angle per local row, NaN where
-    unknown; e.g. :meth:`ufl_frames.mesh.Domain.boundary_angles`) gives one, with
-    the CAD curve's exact tangent.
+    docstring), or, where ``boundary_angles`` gives one, with the CAD curve's exact
+    tangent.
+
+    Args:
+        V: The P1 frame space (:func:`~ufl_frames.fem.energy.frame_space`).
+        isotropic: Whether the frames are isotropic (l1 = l2).
+        max_aspect: The bound l_max/l_min of non-isotropic frames (None or ``math.inf``:
+            none).
+        boundary_angles: One angle per local row, NaN where unknown (e.g.
+            :meth:`ufl_frames.mesh.Domain.boundary_angles`).
+        algebra: The frame algebra of ``V`` (a 2D one: the boundary normals are planar).
+
+    Returns:
+        The constraints, every boundary row fixed (:attr:`Fixed.BOUNDARY`).
     """
     mesh = V.mesh
     tdim = mesh.topology.dim
@@ -130,13 +177,15 @@ def frame_constraints(
     normals = np.stack([np.cos(psi), np.sin(psi)], axis=1)
 
     return FrameConstraints(
-        boundary=boundary,
-        normals=normals,
+        fixed=boundary,
+        directions=normals,
+        kind=np.full(boundary.size, Fixed.BOUNDARY, dtype=np.int8),
         weights=lumped_mass(V),
         owned=index_map.size_local,
         isotropic=isotropic,
         comm=mesh.comm,
-        max_aspect=aspect_bound(isotropic, max_aspect),
+        max_aspect=algebra.aspect_bound(isotropic, max_aspect),
+        algebra=algebra,
     )
 
 
@@ -145,12 +194,21 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray,
     """Constraints that also fix the cross orientation at the vertices of singular triangles.
 
     The vertices of every triangle with a nonzero index (see
-    :mod:`ufl_frames.frames2d.singularities`) are treated like boundary vertices: orientation
-    held at its current value, lengths free. The singularities then stay where the
-    initial field put them — the solver can neither move nor annihilate them — which
-    is the intended use of the MBO field as a template (note §3, "Initial condition").
-    With ``radius`` > 0 every vertex closer than that to a singular triangle's
-    barycentre is held too (collective).
+    :mod:`ufl_frames.frames2d.singularities`) are fixed like boundary vertices
+    (:attr:`Fixed.PINNED`): orientation held at its current value, lengths free. The
+    singularities then stay where the initial field put them — the solver can neither
+    move nor annihilate them — which is the intended use of the MBO field as a template
+    (note §3, "Initial condition"). Collective.
+
+    Args:
+        V: The P1 frame space.
+        constraints: The constraints to add to (their fixed rows stay as they are).
+        q: The local rows (N, count) of the field whose singularities are pinned.
+        radius: With ``radius`` > 0 every vertex closer than that to a singular
+            triangle's barycentre is held too.
+
+    Returns:
+        ``constraints`` with the pinned rows fixed to their current orientation.
     """
     from ufl_frames.frames2d.singularities import triangle_indices
 
@@ -165,12 +223,7 @@ def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray,
             marker.array[np.sum((x[:, :2] - c) ** 2, axis=1) < radius**2] = 1.0
     marker.scatter_reverse(dolfinx.la.InsertMode.add)
     marker.scatter_forward()
-    marker.array[constraints.boundary] = 0.0
+    marker.array[constraints.fixed] = 0.0
     pinned = np.flatnonzero(marker.array > 0).astype(np.int32)
-    _, angles = odeco.q_to_frames(q[pinned])
-    normals = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    return replace(
-        constraints,
-        boundary=np.concatenate([constraints.boundary, pinned]),
-        normals=np.concatenate([constraints.normals, normals]),
-    )
+    directions = constraints.algebra.orientation(q[pinned])
+    return constraints.with_fixed(pinned, directions, Fixed.PINNED)

@@ -1,7 +1,10 @@
 r"""UFL forms of the integrability and Dirichlet energies on P1 frame fields (note §3).
 
 The frame field is q ∈ [P1]⁵: the Odeco coefficients (see :mod:`ufl_frames.frames2d.odeco`) at
-the vertices, interpolated linearly in each triangle. With the Lie bracket of eq. (10)
+the vertices, interpolated linearly in each triangle; the number of coefficients, the
+dimension and the bracket's table are the frame algebra's
+(:data:`ufl_frames.frames2d.algebra.ALGEBRA` unless one is given). With the Lie bracket of
+eq. (10)
 
 .. math::  [u, v]_i = C_{ijkl}\, q_l\, \partial_k q_j
 
@@ -24,51 +27,55 @@ import numpy as np  # noqa: E402
 import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames.frames2d import odeco  # noqa: E402
-from ufl_frames.frames2d.bracket import BRACKET_ENTRIES  # noqa: E402
+from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 
 
-def check_frame_mesh(mesh) -> None:
-    """Raise ValueError unless ``mesh`` is a planar mesh of straight (affine) triangles."""
+def check_frame_mesh(mesh, algebra=ALGEBRA) -> None:
+    """Raise ValueError unless ``mesh`` is a mesh of straight (affine) cells of the frame
+    ``algebra`` (2D: a planar mesh of triangles)."""
     import dolfinx.mesh
 
-    if mesh.topology.dim != 2 or mesh.geometry.dim != 2:
+    dim, cell = algebra.dim, algebra.cell
+    if mesh.topology.dim != dim or mesh.geometry.dim != dim:
+        space = "a planar 2D mesh" if dim == 2 else f"a {dim}D mesh"
         raise ValueError(
-            f"frame fields need a planar 2D mesh, got topological dimension "
+            f"frame fields need {space}, got topological dimension "
             f"{mesh.topology.dim} in {mesh.geometry.dim}D"
         )
-    if mesh.topology.cell_type != dolfinx.mesh.CellType.triangle:
-        raise ValueError(f"frame fields need triangles, got {mesh.topology.cell_type.name}")
+    if mesh.topology.cell_type != getattr(dolfinx.mesh.CellType, cell):
+        raise ValueError(f"frame fields need {cell}s, got {mesh.topology.cell_type.name}")
     if mesh.geometry.cmaps[0].degree != 1:
-        raise ValueError(f"frame fields need straight triangles (geometry degree 1), got "
+        raise ValueError(f"frame fields need straight {cell}s (geometry degree 1), got "
                          f"degree {mesh.geometry.cmaps[0].degree}")
 
 
-def check_frame_function(q, what: str = "q") -> None:
-    """Raise ValueError unless ``q`` is a continuous P1 field of the 5 Odeco coefficients
-    on a mesh that :func:`check_frame_mesh` accepts (what every form here assumes)."""
+def check_frame_function(q, what: str = "q", algebra=ALGEBRA) -> None:
+    """Raise ValueError unless ``q`` is a continuous P1 field of the frame ``algebra``'s
+    coefficients (5 in 2D) on a mesh that :func:`check_frame_mesh` accepts (what every
+    form here assumes)."""
     if not isinstance(q, fem.Function):
         raise ValueError(f"{what} must be a dolfinx Function, got {type(q).__name__}")
     V = q.function_space
-    check_frame_mesh(V.mesh)
+    check_frame_mesh(V.mesh, algebra)
     element = V.ufl_element()
     shape, degree = tuple(V.value_shape), element.embedded_superdegree
     discontinuous = getattr(element, "discontinuous", False)
-    if shape != (odeco.NUM_COEFFICIENTS,) or degree != 1 or discontinuous:
+    if shape != (algebra.count,) or degree != 1 or discontinuous:
         raise ValueError(
-            f"{what} must be a continuous P1 function with {odeco.NUM_COEFFICIENTS} "
+            f"{what} must be a continuous P1 function with {algebra.count} "
             f"components (see frame_space), got value shape {shape}, degree {degree}"
             + (", discontinuous" if discontinuous else ""))
 
 
-def frame_space(mesh) -> fem.FunctionSpace:
-    """The P1 space of frame fields: 5 Odeco coefficients per vertex (straight triangles)."""
-    check_frame_mesh(mesh)
-    return fem.functionspace(mesh, ("Lagrange", 1, (odeco.NUM_COEFFICIENTS,)))
+def frame_space(mesh, algebra=ALGEBRA) -> fem.FunctionSpace:
+    """The P1 space of frame fields: the frame ``algebra``'s coefficients per vertex (5 in
+    2D, straight triangles)."""
+    check_frame_mesh(mesh, algebra)
+    return fem.functionspace(mesh, ("Lagrange", 1, (algebra.count,)))
 
 
 def interpolate_frames(V, f, name: str = "q") -> fem.Function:
-    """The Function of Odeco coefficients of the frames ``f(x) -> (l1, l2, angle)``.
+    """The Function of Odeco coefficients of the 2D frames ``f(x) -> (l1, l2, angle)``.
 
     ``x`` has shape (3, M) (points of the vertices); the frame at each vertex is
     encoded exactly (note eqs. 1–2), so q lies on the Odeco variety at every vertex.
@@ -76,24 +83,26 @@ def interpolate_frames(V, f, name: str = "q") -> fem.Function:
     q = fem.Function(V, name=name)
     x = V.tabulate_dof_coordinates().T
     l1, l2, angle = (np.broadcast_to(np.asarray(a, dtype=np.float64), x.shape[1:]) for a in f(x))
-    q.x.array[:] = odeco.frames_to_q(np.stack([l1, l2], axis=1), angle).ravel()
+    q.x.array[:] = ALGEBRA.frames_to_q(np.stack([l1, l2], axis=1), angle).ravel()
     return q
 
 
-def lie_bracket(q) -> ufl.core.expr.Expr:
-    """[u, v] as a UFL vector expression (note eq. 10); ``q`` a frame field (checked)."""
-    check_frame_function(q)
+def lie_bracket(q, algebra=ALGEBRA) -> ufl.core.expr.Expr:
+    """[u, v] as a UFL vector expression (note eq. 10), r_i = C_ijkl q_l ∂_k q_j with the
+    frame ``algebra``'s table; ``q`` a frame field (checked)."""
+    check_frame_function(q, algebra=algebra)
     grad_q = ufl.grad(q)
+    entries = algebra.bracket_entries
     components = []
-    for i in range(2):
-        terms = [c * q[l] * grad_q[j, k] for (ii, j, k, l), c in BRACKET_ENTRIES.items() if ii == i]
+    for i in range(algebra.bracket_components):
+        terms = [c * q[l] * grad_q[j, k] for (ii, j, k, l), c in entries if ii == i]
         components.append(sum(terms[1:], terms[0]))
     return ufl.as_vector(components)
 
 
-def integrability_energy_form(q) -> ufl.Form:
+def integrability_energy_form(q, algebra=ALGEBRA) -> ufl.Form:
     """H(q) = ½ ∫ |[u, v]|² dx (note eq. 11) as a UFL form."""
-    bracket = lie_bracket(q)
+    bracket = lie_bracket(q, algebra)
     return 0.5 * ufl.inner(bracket, bracket) * ufl.dx
 
 
@@ -107,10 +116,10 @@ def gradient_form(energy: ufl.Form, q) -> ufl.Form:
     return ufl.derivative(energy, q, ufl.TestFunction(q.function_space))
 
 
-def gauss_newton_form(q) -> ufl.Form:
+def gauss_newton_form(q, algebra=ALGEBRA) -> ufl.Form:
     r"""Gauss–Newton bilinear form ∫ D[u,v](q)[w] · D[u,v](q)[δq] dx of H (J^T J)."""
     V = q.function_space
-    bracket = lie_bracket(q)
+    bracket = lie_bracket(q, algebra)
     w, dq = ufl.TestFunction(V), ufl.TrialFunction(V)
     return ufl.inner(ufl.derivative(bracket, q, dq), ufl.derivative(bracket, q, w)) * ufl.dx
 
@@ -122,9 +131,9 @@ def assemble_energy(form) -> float:
     return mesh.comm.allreduce(fem.assemble_scalar(compiled), op=MPI.SUM)
 
 
-def integrability_energy(q) -> float:
+def integrability_energy(q, algebra=ALGEBRA) -> float:
     """H(q) (note eq. 11) of a frame Function q, collective over MPI."""
-    return assemble_energy(integrability_energy_form(q))
+    return assemble_energy(integrability_energy_form(q, algebra))
 
 
 def dirichlet_energy(q) -> float:

@@ -11,17 +11,23 @@ linearisation,
 .. math::  D^2 r_i[\delta q, w] = C_{ijkl}\,(\delta q_l\,\partial_k w_j
            + w_l\,\partial_k \delta q_j).
 
-On P1 frame fields ∇q is constant on a triangle and q linear, so J and r are linear there
-and the integrands quadratic: the three edge midpoints integrate them exactly. FFCx
-expands the UFL forms (:func:`ufl_frames.fem.energy.gauss_newton_form`, the second
-derivative of :func:`~ufl_frames.fem.energy.integrability_energy_form`) into one weight
-per pair of (component, derivative) of the test and the trial function, about 10⁴ flops a
-triangle; written in J, the same matrix costs about 2·10³ (2 × 15 entries of J per point,
-then Jᵀ J). This module writes both kernels in C from the bracket table
-(:data:`~ufl_frames.frames2d.bracket.BRACKET_ENTRIES`), compiles them with cffi as FFCx
-does its own (once, cached beside FFCx's), and gives DOLFINx forms made of them: the
-same matrices as the UFL forms (tested to round-off), assembled by DOLFINx into PETSc
-in 0.21 / 0.30 s instead of 0.46 / 0.48 s at 10⁵ triangles (Gauss–Newton / exact).
+On P1 frame fields ∇q is constant on a cell and q linear, so J and r are linear there
+and the integrands quadratic: a rule of degree 2 (on a triangle the three edge midpoints)
+integrates them exactly. FFCx expands the UFL forms
+(:func:`ufl_frames.fem.energy.gauss_newton_form`, the second derivative of
+:func:`~ufl_frames.fem.energy.integrability_energy_form`) into one weight per pair of
+(component, derivative) of the test and the trial function; written in J, the same matrix
+costs several times fewer flops (2 × 15 entries of J per point on a triangle, then Jᵀ J).
+This module writes both kernels in C, compiles them with cffi as FFCx does its own (once,
+cached beside FFCx's), and gives DOLFINx forms made of them: the same matrices as the UFL
+forms (tested to round-off).
+
+The C code is generated from a frame algebra (:mod:`ufl_frames.frames2d.algebra`, the 2D
+:data:`~ufl_frames.frames2d.algebra.ALGEBRA` unless one is given): its bracket table, its
+number of coefficients a vertex, its dimension and its cell's vertex count are the
+template's parameters, and the cell's gradients and quadrature rule come from this
+module's table of cells (the triangle's). A 3D algebra (15 coefficients on tetrahedra)
+needs its table and a tetrahedron entry there.
 """
 
 import functools
@@ -31,6 +37,7 @@ import importlib.util
 import os
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from ufl_frames.bootstrap import init_petsc
@@ -43,221 +50,302 @@ import numpy as np  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.energy import check_frame_function  # noqa: E402
-from ufl_frames.frames2d.bracket import BRACKET_ENTRIES  # noqa: E402
+from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 
 __all__ = ["model_kernel_source", "damped_gauss_newton_form", "damped_hessian_form",
            "reduced_model_form", "model_action_form"]
 
 _NAMES = {False: "ufl_frames_damped_gauss_newton", True: "ufl_frames_damped_hessian"}
-#: The same in reduced tangent coordinates, by (exact, columns of the basis).
-_REDUCED_NAMES = {(exact, nc): f"{_NAMES[exact]}_reduced{nc}"
-                  for exact in (False, True) for nc in (2, 3)}
-#: The same matrices' products with a field (linear forms).
-_ACTION_NAMES = {exact: f"{_NAMES[exact]}_action" for exact in (False, True)}
-_ALL_NAMES = (*_NAMES.values(), *_REDUCED_NAMES.values(), *_ACTION_NAMES.values())
 _ARGUMENTS = ("(double* restrict A, const double* restrict w, const double* restrict c, "
               "const double* restrict coordinate_dofs, const int* restrict entity_local_index, "
               "const uint8_t* restrict quadrature_permutation, void* custom_data)")
 
 
-def _bracket_lines() -> tuple[list[str], list[str], list[str]]:
+@dataclass(frozen=True)
+class _CellRule:
+    """What the kernels need of a cell besides its sizes: C statements that compute, from
+    the vertices' coordinates ``x`` (3 a vertex), the hat functions' gradients
+    ``dphi[vertices][dim]`` and the cell's measure ``area``; and a quadrature rule exact
+    for quadratics, ``phi[points][vertices]`` (the hat functions at the points) and
+    ``weight`` (one for all points)."""
+
+    gradients: tuple[str, ...]
+    rule: tuple[str, ...]
+    points: int
+
+
+#: The cells the kernels are written for, by the algebra's ``cell`` (a tetrahedron: the
+#: inverse of its 3 × 3 Jacobian and a 4-point rule of degree 2).
+_CELLS = {
+    "triangle": _CellRule(
+        gradients=(
+            "  const double e1x = x[3] - x[0], e1y = x[4] - x[1];",
+            "  const double e2x = x[6] - x[0], e2y = x[7] - x[1];",
+            "  const double det = e1x * e2y - e1y * e2x, area = 0.5 * fabs(det);",
+            "  double dphi[3][2];",
+            "  dphi[1][0] = e2y / det; dphi[1][1] = -e2x / det;",
+            "  dphi[2][0] = -e1y / det; dphi[2][1] = e1x / det;",
+            "  dphi[0][0] = -dphi[1][0] - dphi[2][0]; dphi[0][1] = -dphi[1][1] - dphi[2][1];",
+        ),
+        rule=(
+            "  /* the edge midpoints: the rule of degree 2 with weights area / 3 */",
+            "  static const double phi[3][3] = "
+            "{{0.5, 0.5, 0.0}, {0.0, 0.5, 0.5}, {0.5, 0.0, 0.5}};",
+            "  const double weight = area / 3.0;",
+        ),
+        points=3,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class _Sizes:
+    """The sizes the C code is written for, from a frame algebra: ``n`` coefficients a
+    vertex, ``nv`` vertices a cell, ``d`` the dimension, ``nr`` components of the bracket,
+    ``nd`` = nv n unknowns a cell, ``ncs`` the column counts of the reduced kernels (the
+    largest first) and the cell's rule."""
+
+    n: int
+    nv: int
+    d: int
+    nr: int
+    ncs: tuple[int, ...]
+    cell: _CellRule
+
+    @property
+    def nd(self) -> int:
+        return self.nv * self.n
+
+    @classmethod
+    def of(cls, algebra) -> "_Sizes":
+        full = algebra.tangent_columns
+        return cls(n=algebra.count, nv=algebra.cell_vertices, d=algebra.dim,
+                   nr=algebra.bracket_components,
+                   ncs=(full, full - len(algebra.anisotropy_columns)),
+                   cell=_CELLS[algebra.cell])
+
+
+def _reduced_names(algebra) -> dict:
+    """The reduced kernels' names by (exact, columns of the basis)."""
+    return {(exact, nc): f"{_NAMES[exact]}_reduced{nc}"
+            for exact in (False, True) for nc in sorted(_Sizes.of(algebra).ncs)}
+
+
+#: The same matrices' products with a field (linear forms).
+_ACTION_NAMES = {exact: f"{_NAMES[exact]}_action" for exact in (False, True)}
+
+
+def _all_names(algebra) -> tuple[str, ...]:
+    return (*_NAMES.values(), *_reduced_names(algebra).values(), *_ACTION_NAMES.values())
+
+
+def _bracket_lines(algebra, z: _Sizes) -> tuple[list[str], list[str], list[str]]:
     """C statements from the bracket's entries C_ijkl: J's two coefficient arrays
     a[i][l] = Σ C_ijkl ∂_k q_j (multiplies δq_l) and b[i][j][k] = Σ C_ijkl q_l (multiplies
     ∂_k δq_j), q and ∇q at the point; and the residual's second derivative paired with
     the residual, r_i C_ijkl (δq_l ∂_k w_j + w_l ∂_k δq_j), into the element matrix."""
     a_terms, b_terms, second = {}, {}, []
-    for (i, j, k, l), value in sorted(BRACKET_ENTRIES.items()):
+    n, nv, nd = z.n, z.nv, z.nd
+    for (i, j, k, l), value in sorted(algebra.bracket_entries):
         a_terms.setdefault((i, l), []).append(f"{float(value)!r} * gq[{j}][{k}]")
         b_terms.setdefault((i, j, k), []).append(f"{float(value)!r} * qp[{l}]")
         second.append(
             f"      {{ const double s = weight * r[{i}] * {float(value)!r};"
-            f" for (int v = 0; v < 3; ++v) for (int u = 0; u < 3; ++u) {{"
-            f" A[15 * (5 * v + {j}) + 5 * u + {l}] += s * phi[p][u] * dphi[v][{k}];"
-            f" A[15 * (5 * v + {l}) + 5 * u + {j}] += s * phi[p][v] * dphi[u][{k}]; }} }}")
+            f" for (int v = 0; v < {nv}; ++v) for (int u = 0; u < {nv}; ++u) {{"
+            f" A[{nd} * ({n} * v + {j}) + {n} * u + {l}] += s * phi[p][u] * dphi[v][{k}];"
+            f" A[{nd} * ({n} * v + {l}) + {n} * u + {j}] += s * phi[p][v] * dphi[u][{k}]; }} }}")
     a_lines = [f"  a[{i}][{l}] = {' + '.join(t)};" for (i, l), t in sorted(a_terms.items())]
     b_lines = [f"    b[{i}][{j}][{k}] = {' + '.join(t)};" for (i, j, k), t in
                sorted(b_terms.items())]
     return a_lines, b_lines, second
 
 
-def _geometry_lines(a_lines: list[str]) -> list[str]:
-    """C statements: the triangle's gradients of the hat functions dphi, area, ∇q (gq),
-    J's first coefficient array a and the quadrature rule (phi, weight)."""
+def _continued(first: str, indent: str, terms: list[str], per_line: int, end: str = ";"):
+    """``first`` followed by the ``terms`` joined by " + ", ``per_line`` a line, the later
+    lines starting with ``indent`` + "+ "."""
+    chunks = [terms[i : i + per_line] for i in range(0, len(terms), per_line)]
+    lines = [first + " + ".join(chunks[0])]
+    lines += [f"{indent}+ " + " + ".join(chunk) for chunk in chunks[1:]]
+    lines[-1] += end
+    return lines
+
+
+def _geometry_lines(z: _Sizes, a_lines: list[str]) -> list[str]:
+    """C statements: the cell's gradients of the hat functions dphi, its measure area, ∇q
+    (gq), J's first coefficient array a and the quadrature rule (phi, weight)."""
+    n, d = z.n, z.d
     return [
-        "  const double e1x = x[3] - x[0], e1y = x[4] - x[1];",
-        "  const double e2x = x[6] - x[0], e2y = x[7] - x[1];",
-        "  const double det = e1x * e2y - e1y * e2x, area = 0.5 * fabs(det);",
-        "  double dphi[3][2];",
-        "  dphi[1][0] = e2y / det; dphi[1][1] = -e2x / det;",
-        "  dphi[2][0] = -e1y / det; dphi[2][1] = e1x / det;",
-        "  dphi[0][0] = -dphi[1][0] - dphi[2][0]; dphi[0][1] = -dphi[1][1] - dphi[2][1];",
-        "  double gq[5][2];",
-        "  for (int j = 0; j < 5; ++j)",
-        "    for (int k = 0; k < 2; ++k)",
-        "      gq[j][k] = w[j] * dphi[0][k] + w[5 + j] * dphi[1][k] + w[10 + j] * dphi[2][k];",
-        "  double a[2][5] = {{0}};",
+        *z.cell.gradients,
+        f"  double gq[{n}][{d}];",
+        f"  for (int j = 0; j < {n}; ++j)",
+        f"    for (int k = 0; k < {d}; ++k)",
+        "      gq[j][k] = " + " + ".join(
+            "w[j] * dphi[0][k]" if v == 0 else f"w[{n * v} + j] * dphi[{v}][k]"
+            for v in range(z.nv)) + ";",
+        f"  double a[{z.nr}][{n}] = {{{{0}}}};",
         *a_lines,
-        "  /* the edge midpoints: the rule of degree 2 with weights area / 3 */",
-        "  static const double phi[3][3] = {{0.5, 0.5, 0.0}, {0.0, 0.5, 0.5}, {0.5, 0.0, 0.5}};",
-        "  const double weight = area / 3.0;",
+        *z.cell.rule,
     ]
 
 
-def _point_lines(b_lines: list[str]) -> list[str]:
+def _point_lines(z: _Sizes, b_lines: list[str]) -> list[str]:
     """C statements at quadrature point p: q there (qp), J's second coefficient array b
-    and J (2 × 15: the bracket's linearisation at the 15 basis functions)."""
+    and J (nr × nd: the bracket's linearisation at the nd basis functions)."""
+    n, d, nr = z.n, z.d, z.nr
     return [
-        "    double qp[5];",
-        "    for (int l = 0; l < 5; ++l)",
-        "      qp[l] = phi[p][0] * w[l] + phi[p][1] * w[5 + l] + phi[p][2] * w[10 + l];",
-        "    double b[2][5][2] = {{{0}}};",
+        f"    double qp[{n}];",
+        f"    for (int l = 0; l < {n}; ++l)",
+        "      qp[l] = " + " + ".join(
+            "phi[p][0] * w[l]" if v == 0 else f"phi[p][{v}] * w[{n * v} + l]"
+            for v in range(z.nv)) + ";",
+        f"    double b[{nr}][{n}][{d}] = {{{{{{0}}}}}};",
         *b_lines,
-        "    double J[2][15];",
-        "    for (int i = 0; i < 2; ++i)",
-        "      for (int v = 0; v < 3; ++v)",
-        "        for (int m = 0; m < 5; ++m)",
-        "          J[i][5 * v + m] = phi[p][v] * a[i][m] + b[i][m][0] * dphi[v][0]",
-        "                            + b[i][m][1] * dphi[v][1];",
+        f"    double J[{nr}][{z.nd}];",
+        f"    for (int i = 0; i < {nr}; ++i)",
+        f"      for (int v = 0; v < {z.nv}; ++v)",
+        f"        for (int m = 0; m < {n}; ++m)",
+        *_continued(f"          J[i][{n} * v + m] = phi[p][v] * a[i][m] + ",
+                    " " * 28, [f"b[i][m][{k}] * dphi[v][{k}]" for k in range(d)], 1),
     ]
 
 
-#: C statements: λ (K + M/A) of the vertices v, u of the triangle, into ``value``.
-_DAMPING_LINES = [
-    "      const double stiffness = area * (dphi[v][0] * dphi[u][0]",
-    "                                       + dphi[v][1] * dphi[u][1]);",
-    "      const double mass = area / 12.0 * (v == u ? 2.0 : 1.0);",
-    "      const double value = lambda * (stiffness + inverse_area * mass);",
-]
+def _damping_lines(z: _Sizes) -> list[str]:
+    """C statements: λ (K + M/A) of the vertices v, u of the cell, into ``value`` (the P1
+    mass matrix: |K| (1 + δ_vu) / ((d + 1)(d + 2)))."""
+    return [
+        *_continued("      const double stiffness = area * (", " " * 39,
+                    [f"dphi[v][{k}] * dphi[u][{k}]" for k in range(z.d)], 1, end=");"),
+        f"      const double mass = area / {(z.d + 1) * (z.d + 2)}.0 * (v == u ? 2.0 : 1.0);",
+        "      const double value = lambda * (stiffness + inverse_area * mass);",
+    ]
 
 
-@functools.cache
-def model_kernel_source() -> str:
-    """The C source of the element kernels (DOLFINx's ``tabulate_tensor`` signature):
-    ``ufl_frames_damped_gauss_newton`` and ``ufl_frames_damped_hessian``, the same in
-    reduced coordinates (``…_reduced2``, ``…_reduced3``) and their products with a field
-    (``…_action``).
+def _outer_lines(z: _Sizes, target: str, rows: str, columns: str, count: str,
+                 stride: str) -> list[str]:
+    """C statements: target[stride r + s] += weight Σ_i rows[i][r] rows[i][s]."""
+    return [
+        f"    for (int r = 0; r < {count}; ++r)",
+        "    {",
+        "      const double " + ", ".join(f"j{i} = weight * {rows}[{i}][r]"
+                                          for i in range(z.nr)) + ";",
+        f"      for (int s = 0; s < {count}; ++s)",
+        f"        {target}[{stride} * r + s] += "
+        + " + ".join(f"j{i} * {columns}[{i}][s]" for i in range(z.nr)) + ";",
+        "    }",
+    ]
 
-    Per triangle: ``w`` the 3 × 5 Odeco coefficients of q at its vertices (vertex-major),
-    ``c`` = (λ, 1/A), ``coordinate_dofs`` its 3 vertices (x, y, z). ``A`` (15 × 15,
-    row-major, zeroed by DOLFINx) receives Σ_points (area/3) J[φ_s]·J[φ_r] (+ r · D²r[φ_s,
-    φ_r] for the Hessian, r = [u, v] at the point) + λ (K_rs + M_rs/A) δ_components.
-    The reduced kernels read after q in ``w`` the 5 × c blocks T_v of a tangent basis
-    and write Tᵀ A T (3c × 3c); Gauss–Newton's from J T (2 × 3c a point) directly, about
-    a third of the flops of the 15 × 15 matrix and its product. The action kernels read
-    a field d after q and write A d (15 values).
-    """
-    a_lines, b_lines, second = _bracket_lines()
-    return "\n".join([
-        "#include <math.h>",
-        "#include <stdint.h>",
+
+def _model_lines(z: _Sizes, a_lines, b_lines, second) -> list[str]:
+    """C function ``model``: the damped (Gauss–Newton or exact) nd × nd element matrix."""
+    n, nv, nd = z.n, z.nv, z.nd
+    return [
         "static inline void model(double* restrict A, const double* restrict w,",
         "                         const double* restrict c, const double* restrict x,",
         "                         const int exact)",
         "{",
-        *_geometry_lines(a_lines),
-        "  for (int p = 0; p < 3; ++p)",
+        *_geometry_lines(z, a_lines),
+        f"  for (int p = 0; p < {z.cell.points}; ++p)",
         "  {",
-        *_point_lines(b_lines),
-        "    for (int r = 0; r < 15; ++r)",
-        "    {",
-        "      const double j0 = weight * J[0][r], j1 = weight * J[1][r];",
-        "      for (int s = 0; s < 15; ++s)",
-        "        A[15 * r + s] += j0 * J[0][s] + j1 * J[1][s];",
-        "    }",
+        *_point_lines(z, b_lines),
+        *_outer_lines(z, "A", "J", "J", str(nd), str(nd)),
         "    if (exact)",
         "    {",
-        "      double r[2];",
-        "      for (int i = 0; i < 2; ++i)",
-        "        r[i] = a[i][0] * qp[0] + a[i][1] * qp[1] + a[i][2] * qp[2] + a[i][3] * qp[3]",
-        "               + a[i][4] * qp[4];",
+        f"      double r[{z.nr}];",
+        f"      for (int i = 0; i < {z.nr}; ++i)",
+        *_continued("        r[i] = ", " " * 15, [f"a[i][{m}] * qp[{m}]" for m in range(n)], 4),
         *second,
         "    }",
         "  }",
-        "  /* λ (K + M / A) on each of the 5 components */",
+        f"  /* λ (K + M / A) on each of the {n} components */",
         "  const double lambda = c[0], inverse_area = c[1];",
-        "  for (int v = 0; v < 3; ++v)",
-        "    for (int u = 0; u < 3; ++u)",
+        f"  for (int v = 0; v < {nv}; ++v)",
+        f"    for (int u = 0; u < {nv}; ++u)",
         "    {",
-        *_DAMPING_LINES,
-        "      for (int m = 0; m < 5; ++m)",
-        "        A[15 * (5 * v + m) + 5 * u + m] += value;",
+        *_damping_lines(z),
+        f"      for (int m = 0; m < {n}; ++m)",
+        f"        A[{nd} * ({n} * v + m) + {n} * u + m] += value;",
         "    }",
         "}",
-        *[line for exact, name in _NAMES.items() for line in (
-            f"void {name}{_ARGUMENTS}",
-            "{",
-            f"  model(A, w, c, coordinate_dofs, {int(exact)});",
-            "}")],
+    ]
+
+
+def _reduced_gauss_newton_lines(z: _Sizes, a_lines, b_lines) -> list[str]:
+    """C function ``reduced_gauss_newton``: Σ (J T)ᵀ (J T) + λ (K + M/A) T_vᵀ T_u."""
+    n, nv, nd = z.n, z.nv, z.nd
+    return [
         "/* Gauss–Newton in tangent coordinates: Σ (J T)ᵀ (J T) + λ (K + M/A) T_vᵀ T_u, with",
-        "   T_v (5 × nc, row-major) the tangent basis of vertex v, after q in w */",
+        f"   T_v ({n} × nc, row-major) the tangent basis of vertex v, after q in w */",
         "static inline void reduced_gauss_newton(double* restrict R, const double* restrict w,",
         "                                        const double* restrict c,",
         "                                        const double* restrict x, const int nc)",
         "{",
-        "  const double* restrict T = w + 15;",
-        "  const int m = 3 * nc;",
-        *_geometry_lines(a_lines),
-        "  for (int p = 0; p < 3; ++p)",
+        f"  const double* restrict T = w + {nd};",
+        f"  const int m = {nv} * nc;",
+        *_geometry_lines(z, a_lines),
+        f"  for (int p = 0; p < {z.cell.points}; ++p)",
         "  {",
-        *_point_lines(b_lines),
-        "    double JT[2][9];",
-        "    for (int i = 0; i < 2; ++i)",
-        "      for (int v = 0; v < 3; ++v)",
+        *_point_lines(z, b_lines),
+        f"    double JT[{z.nr}][{nv * max(z.ncs)}];",
+        f"    for (int i = 0; i < {z.nr}; ++i)",
+        f"      for (int v = 0; v < {nv}; ++v)",
         "        for (int k = 0; k < nc; ++k)",
         "        {",
         "          double s = 0.0;",
-        "          for (int n = 0; n < 5; ++n)",
-        "            s += J[i][5 * v + n] * T[5 * nc * v + nc * n + k];",
+        f"          for (int n = 0; n < {n}; ++n)",
+        f"            s += J[i][{n} * v + n] * T[{n} * nc * v + nc * n + k];",
         "          JT[i][nc * v + k] = s;",
         "        }",
-        "    for (int r = 0; r < m; ++r)",
-        "    {",
-        "      const double j0 = weight * JT[0][r], j1 = weight * JT[1][r];",
-        "      for (int s = 0; s < m; ++s)",
-        "        R[m * r + s] += j0 * JT[0][s] + j1 * JT[1][s];",
-        "    }",
+        *_outer_lines(z, "R", "JT", "JT", "m", "m"),
         "  }",
         "  const double lambda = c[0], inverse_area = c[1];",
-        "  for (int v = 0; v < 3; ++v)",
-        "    for (int u = 0; u < 3; ++u)",
+        f"  for (int v = 0; v < {nv}; ++v)",
+        f"    for (int u = 0; u < {nv}; ++u)",
         "    {",
-        *_DAMPING_LINES,
+        *_damping_lines(z),
         "      for (int k = 0; k < nc; ++k)",
         "        for (int l = 0; l < nc; ++l)",
         "        {",
         "          double s = 0.0;",
-        "          for (int n = 0; n < 5; ++n)",
-        "            s += T[5 * nc * v + nc * n + k] * T[5 * nc * u + nc * n + l];",
+        f"          for (int n = 0; n < {n}; ++n)",
+        f"            s += T[{n} * nc * v + nc * n + k] * T[{n} * nc * u + nc * n + l];",
         "          R[m * (nc * v + k) + nc * u + l] += value * s;",
         "        }",
         "    }",
         "}",
-        "/* the full Hessian in tangent coordinates: Tᵀ A T from the 15 × 15 matrix */",
+    ]
+
+
+def _reduced_hessian_and_action_lines(z: _Sizes) -> list[str]:
+    """C functions ``reduced_hessian`` (Tᵀ A T from the nd × nd matrix) and ``action``
+    (A d)."""
+    n, nv, nd = z.n, z.nv, z.nd
+    return [
+        f"/* the full Hessian in tangent coordinates: Tᵀ A T from the {nd} × {nd} matrix */",
         "static inline void reduced_hessian(double* restrict R, const double* restrict w,",
         "                                   const double* restrict c,",
         "                                   const double* restrict x, const int nc)",
         "{",
-        "  double A[225] = {0};",
+        f"  double A[{nd * nd}] = {{0}};",
         "  model(A, w, c, x, 1);",
-        "  const double* restrict T = w + 15;",
-        "  const int m = 3 * nc;",
-        "  double AT[15 * 9];  /* A T: 15 × 3 nc */",
-        "  for (int r = 0; r < 15; ++r)",
-        "    for (int u = 0; u < 3; ++u)",
+        f"  const double* restrict T = w + {nd};",
+        f"  const int m = {nv} * nc;",
+        f"  double AT[{nd} * {nv * max(z.ncs)}];  /* A T: {nd} × {nv} nc */",
+        f"  for (int r = 0; r < {nd}; ++r)",
+        f"    for (int u = 0; u < {nv}; ++u)",
         "      for (int l = 0; l < nc; ++l)",
         "      {",
         "        double s = 0.0;",
-        "        for (int n = 0; n < 5; ++n)",
-        "          s += A[15 * r + 5 * u + n] * T[5 * nc * u + nc * n + l];",
+        f"        for (int n = 0; n < {n}; ++n)",
+        f"          s += A[{nd} * r + {n} * u + n] * T[{n} * nc * u + nc * n + l];",
         "        AT[m * r + nc * u + l] = s;",
         "      }",
-        "  for (int v = 0; v < 3; ++v)",
+        f"  for (int v = 0; v < {nv}; ++v)",
         "    for (int k = 0; k < nc; ++k)",
         "      for (int j = 0; j < m; ++j)",
         "      {",
         "        double s = 0.0;",
-        "        for (int n = 0; n < 5; ++n)",
-        "          s += T[5 * nc * v + nc * n + k] * AT[m * (5 * v + n) + j];",
+        f"        for (int n = 0; n < {n}; ++n)",
+        f"          s += T[{n} * nc * v + nc * n + k] * AT[m * ({n} * v + n) + j];",
         "        R[m * (nc * v + k) + j] += s;",
         "      }",
         "}",
@@ -266,13 +354,49 @@ def model_kernel_source() -> str:
         "                          const double* restrict c, const double* restrict x,",
         "                          const int exact)",
         "{",
-        "  double A[225] = {0};",
+        f"  double A[{nd * nd}] = {{0}};",
         "  model(A, w, c, x, exact);",
-        "  for (int r = 0; r < 15; ++r)",
-        "    for (int s = 0; s < 15; ++s)",
-        "      b[r] += A[15 * r + s] * w[15 + s];",
+        f"  for (int r = 0; r < {nd}; ++r)",
+        f"    for (int s = 0; s < {nd}; ++s)",
+        f"      b[r] += A[{nd} * r + s] * w[{nd} + s];",
         "}",
-        *[line for (exact, nc), name in _REDUCED_NAMES.items() for line in (
+    ]
+
+
+@functools.cache
+def model_kernel_source(algebra=ALGEBRA) -> str:
+    """The C source of the element kernels (DOLFINx's ``tabulate_tensor`` signature) of a
+    frame ``algebra``: ``ufl_frames_damped_gauss_newton`` and ``ufl_frames_damped_hessian``,
+    the same in reduced coordinates (``…_reduced2``, ``…_reduced3`` in 2D: the column
+    counts of isotropic and general frames) and their products with a field
+    (``…_action``).
+
+    Written for the algebra's sizes: n coefficients a vertex (``count``, 5 in 2D), nv
+    vertices a cell (``cell_vertices``, 3), the dimension d (``dim``, 2), the bracket's
+    components and table; the cell's gradients and quadrature rule come from the cell
+    table of this module (the triangle's). In 2D, per triangle: ``w`` the 3 × 5 Odeco
+    coefficients of q at its vertices (vertex-major), ``c`` = (λ, 1/A),
+    ``coordinate_dofs`` its 3 vertices (x, y, z). ``A`` (15 × 15, row-major, zeroed by
+    DOLFINx) receives Σ_points (area/3) J[φ_s]·J[φ_r] (+ r · D²r[φ_s, φ_r] for the
+    Hessian, r = [u, v] at the point) + λ (K_rs + M_rs/A) δ_components. The reduced
+    kernels read after q in ``w`` the 5 × c blocks T_v of a tangent basis and write
+    Tᵀ A T (3c × 3c); Gauss–Newton's from J T (2 × 3c a point) directly. The action
+    kernels read a field d after q and write A d (15 values).
+    """
+    z = _Sizes.of(algebra)
+    a_lines, b_lines, second = _bracket_lines(algebra, z)
+    return "\n".join([
+        "#include <math.h>",
+        "#include <stdint.h>",
+        *_model_lines(z, a_lines, b_lines, second),
+        *[line for exact, name in _NAMES.items() for line in (
+            f"void {name}{_ARGUMENTS}",
+            "{",
+            f"  model(A, w, c, coordinate_dofs, {int(exact)});",
+            "}")],
+        *_reduced_gauss_newton_lines(z, a_lines, b_lines),
+        *_reduced_hessian_and_action_lines(z),
+        *[line for (exact, nc), name in _reduced_names(algebra).items() for line in (
             f"void {name}{_ARGUMENTS}",
             "{",
             f"  reduced_{'hessian' if exact else 'gauss_newton'}(A, w, c, coordinate_dofs, "
@@ -292,10 +416,11 @@ def model_kernel_source() -> str:
 _LOADED = {}
 
 
-def _compiled(comm):
-    """The compiled kernel module (collective on its first call): built by rank 0 into
-    the JIT cache the first time (named by a hash of the source), loaded on every rank."""
-    source = model_kernel_source()
+def _compiled(comm, algebra=ALGEBRA):
+    """The compiled kernel module of a frame ``algebra`` (collective on its first call):
+    built by rank 0 into the JIT cache the first time (named by a hash of the source),
+    loaded on every rank."""
+    source = model_kernel_source(algebra)
     digest = hashlib.sha256((source + sys.version).encode()).hexdigest()[:16]
     name = f"_ufl_frames_model_kernels_{digest}"
     if name in _LOADED:
@@ -306,7 +431,7 @@ def _compiled(comm):
     error = None
     if comm.rank == 0 and not path.is_file():
         try:
-            _build(name, source, cache, path)
+            _build(name, source, cache, path, _all_names(algebra))
         except Exception as exc:  # every rank raises below, not rank 0 alone
             error = f"{type(exc).__name__}: {exc}"
     error = comm.bcast(error, root=0)
@@ -319,15 +444,15 @@ def _compiled(comm):
     return module
 
 
-def _build(name: str, source: str, cache: Path, path: Path) -> None:
-    """Compile ``source`` with cffi in a temporary folder and move the library to ``path``
-    (a rename: a reader never sees half a file)."""
+def _build(name: str, source: str, cache: Path, path: Path, functions) -> None:
+    """Compile ``source`` (which defines ``functions``) with cffi in a temporary folder and
+    move the library to ``path`` (a rename: a reader never sees half a file)."""
     import cffi
 
     cache.mkdir(parents=True, exist_ok=True)
     ffi = cffi.FFI()
     ffi.cdef("\n".join(f"void {function}{_ARGUMENTS.replace('restrict ', '')};"
-                        for function in _ALL_NAMES))
+                        for function in functions))
     ffi.set_source(name, source, extra_compile_args=["-O2", "-std=c99"])
     with tempfile.TemporaryDirectory(dir=cache) as build:
         built = Path(ffi.compile(tmpdir=build, verbose=False))
@@ -335,61 +460,89 @@ def _build(name: str, source: str, cache: Path, path: Path) -> None:
 
 
 def damped_gauss_newton_form(q: fem.Function, damping: fem.Constant,
-                             inverse_area: fem.Constant) -> fem.Form:
+                             inverse_area: fem.Constant, algebra=ALGEBRA) -> fem.Form:
     """The DOLFINx form of ∫ J[δq]·J[w] + λ (∇δq:∇w + δq·w/A) dx with the compiled kernel:
-    the matrix of ``energy.gauss_newton_form(q) + λ sobolev_form`` (λ = ``damping``, 1/A =
-    ``inverse_area``, both read at every assembly), over the cells this rank owns
-    (collective: compiles once)."""
-    return _damped_form(q, damping, inverse_area, exact=False)
+    the matrix of ``energy.gauss_newton_form(q) + λ sobolev_form``, over the cells this
+    rank owns.
+
+    Args:
+        q: The frame field.
+        damping: λ, read at every assembly.
+        inverse_area: 1/A, read at every assembly.
+        algebra: The frame algebra of ``q``.
+
+    Returns:
+        The compiled form (collective: compiles once).
+    """
+    return _damped_form(q, damping, inverse_area, False, algebra)
 
 
 def damped_hessian_form(q: fem.Function, damping: fem.Constant,
-                        inverse_area: fem.Constant) -> fem.Form:
+                        inverse_area: fem.Constant, algebra=ALGEBRA) -> fem.Form:
     """The same with the full Hessian of H, ∫ J[δq]·J[w] + r·D²r[δq, w] dx (r = [u, v],
     D²r_i[δq, w] = C_ijkl (δq_l ∂_k w_j + w_l ∂_k δq_j)): the matrix of the UFL second
     derivative of :func:`energy.integrability_energy_form` plus the damping."""
-    return _damped_form(q, damping, inverse_area, exact=True)
+    return _damped_form(q, damping, inverse_area, True, algebra)
 
 
 def reduced_model_form(q: fem.Function, basis: fem.Function, space: fem.FunctionSpace,
                        damping: fem.Constant, inverse_area: fem.Constant,
-                       exact: bool = False) -> fem.Form:
+                       exact: bool = False, algebra=ALGEBRA) -> fem.Form:
     """The model's matrix of :func:`damped_gauss_newton_form` (``exact``:
     :func:`damped_hessian_form`) in tangent coordinates, Tᵀ A T, assembled directly: no
-    5N × 5N matrix and no product Pᵀ A P (the reduced matrix of
+    nN × nN matrix and no product Pᵀ A P (the reduced matrix of
     :class:`~ufl_frames.solvers.hessian.GaussNewtonModel`).
 
-    ``basis`` is a P1 function with 5·c components a vertex, the 5 × c matrix T_v row-major
-    (c = 3 tangent directions of non-isotropic frames, 2 isotropic; a zero column where a
-    direction is absent gives a zero row and column); ``space`` the P1 space of c
-    components the matrix acts on. Both must number the vertices as ``q``'s space does,
-    so that the reduced unknown (v, k) pairs with column k of T_v.
+    Both spaces must number the vertices as ``q``'s space does, so that the reduced
+    unknown (v, k) pairs with column k of T_v.
+
+    Args:
+        q: The frame field.
+        basis: A P1 function with n·c components a vertex, the n × c matrix T_v row-major
+            (n the algebra's ``count``; in 2D c = 3 tangent directions of non-isotropic
+            frames, 2 isotropic; a zero column where a direction is absent gives a zero
+            row and column).
+        space: The P1 space of c components the matrix acts on.
+        damping: λ, read at every assembly.
+        inverse_area: 1/A, read at every assembly.
+        exact: The full Hessian instead of Gauss–Newton.
+        algebra: The frame algebra of ``q``.
+
+    Returns:
+        The compiled form (collective: compiles once).
     """
-    check_frame_function(q)
+    check_frame_function(q, algebra=algebra)
     V = q.function_space
-    columns = basis.function_space.dofmap.index_map_bs // 5
-    if (columns not in (2, 3) or basis.function_space.dofmap.index_map_bs != 5 * columns
+    n = algebra.count
+    names = _reduced_names(algebra)
+    counts = sorted(nc for _, nc in names)
+    columns = basis.function_space.dofmap.index_map_bs // n
+    if (columns not in counts or basis.function_space.dofmap.index_map_bs != n * columns
             or space.dofmap.index_map_bs != columns):
-        raise ValueError(f"a tangent basis of 2 or 3 columns and a space of as many "
+        allowed = " or ".join(str(nc) for nc in dict.fromkeys(counts))
+        raise ValueError(f"a tangent basis of {allowed} columns and a space of as many "
                          f"components, not {basis.function_space.dofmap.index_map_bs} "
                          f"and {space.dofmap.index_map_bs}")
     for other in (basis.function_space, space):
         _check_same_vertices(V, other)
-    return _compiled_form(_REDUCED_NAMES[(exact, columns)], [space, space], [q, basis],
-                          [damping, inverse_area])
+    return _compiled_form(names[(exact, columns)], [space, space], [q, basis],
+                          [damping, inverse_area], algebra)
 
 
 def model_action_form(q: fem.Function, direction: fem.Function, damping: fem.Constant,
-                      inverse_area: fem.Constant, exact: bool = False) -> fem.Form:
+                      inverse_area: fem.Constant, exact: bool = False,
+                      algebra=ALGEBRA) -> fem.Form:
     """The vector A d of the matrix A of :func:`damped_gauss_newton_form` (``exact``:
     :func:`damped_hessian_form`) and a P1 field ``direction`` d of ``q``'s space, without
-    A (a linear form, the element matrix applied in the kernel)."""
-    check_frame_function(q)
+    A (a linear form, the element matrix applied in the kernel). ``damping``,
+    ``inverse_area`` and ``algebra`` as there."""
+    check_frame_function(q, algebra=algebra)
     _check_same_vertices(q.function_space, direction.function_space)
     if direction.function_space.dofmap.index_map_bs != q.function_space.dofmap.index_map_bs:
-        raise ValueError("the direction must have the frame field's 5 components")
+        raise ValueError(f"the direction must have the frame field's {algebra.count} "
+                         f"components")
     return _compiled_form(_ACTION_NAMES[exact], [q.function_space], [q, direction],
-                          [damping, inverse_area])
+                          [damping, inverse_area], algebra)
 
 
 def _check_same_vertices(V: fem.FunctionSpace, W: fem.FunctionSpace) -> None:
@@ -400,17 +553,17 @@ def _check_same_vertices(V: fem.FunctionSpace, W: fem.FunctionSpace) -> None:
         raise ValueError("the spaces do not number the mesh's vertices alike")
 
 
-def _damped_form(q, damping, inverse_area, exact: bool) -> fem.Form:
-    check_frame_function(q)
+def _damped_form(q, damping, inverse_area, exact: bool, algebra) -> fem.Form:
+    check_frame_function(q, algebra=algebra)
     V = q.function_space
-    return _compiled_form(_NAMES[exact], [V, V], [q], [damping, inverse_area])
+    return _compiled_form(_NAMES[exact], [V, V], [q], [damping, inverse_area], algebra)
 
 
-def _compiled_form(name: str, spaces, coefficients, constants) -> fem.Form:
+def _compiled_form(name: str, spaces, coefficients, constants, algebra) -> fem.Form:
     """A DOLFINx form over the owned cells whose kernel is the compiled function ``name``
-    (collective: compiles once)."""
+    of ``algebra``'s kernels (collective: compiles once)."""
     mesh = coefficients[0].function_space.mesh
-    module = _compiled(mesh.comm)
+    module = _compiled(mesh.comm, algebra)
     kernel = module.ffi.addressof(module.lib, name)
     pointer = int(module.ffi.cast("uintptr_t", kernel))
     cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)

@@ -1,9 +1,9 @@
-r"""The frame manifold 𝓜 as one object: projection, retraction, tangent spaces, curvature.
+r"""The frame manifold 𝓜 as one object: closest point, retraction, tangent spaces, curvature.
 
 In the unknowns x_v = √m_v q_v (m_v the lumped mass of vertex v) the solver works on
 
     𝓜 = { x : x_v on the Odeco variety (isotropic: l1 = l2) at every vertex v,
-              its orientation fixed at boundary and pinned vertices,
+              its orientation fixed at the fixed rows (boundary, pinned vertices),
               l_max/l_min ≤ A (non-isotropic frames, an active set),  |x|² = ρ² }
 
 (note §3). The Euclidean inner product of x is the lumped L² product of q, so step
@@ -12,13 +12,15 @@ orientation, aspect bound) commute with the scaling — the variety is a cone �
 act on q and x alike; only the sphere |x| = ρ couples the vertices.
 
 :class:`FrameManifold` gathers what a Riemannian method needs of 𝓜, in the manner of
-pymanopt's manifolds:
+pymanopt's manifolds (and in their words: :meth:`~FrameManifold.projection` is the
+projection onto a tangent space, :meth:`~FrameManifold.retraction` moves a point along a
+tangent vector):
 
-* :meth:`~FrameManifold.project` and :meth:`~FrameManifold.retract`: steps 4 and 4–5 of
-  the note's loop (pointwise closest frame, then the uniform normalisation);
-* :meth:`~FrameManifold.tangent_basis`: per vertex an orthonormal basis (5 × 3, zero
-  columns where a direction is absent) of the pointwise tangent space;
-* :meth:`~FrameManifold.tangent_project` (step 2) and
+* :meth:`~FrameManifold.closest_point` and :meth:`~FrameManifold.retraction`: steps 4 and
+  4–5 of the note's loop (pointwise closest frame, then the uniform normalisation);
+* :meth:`~FrameManifold.tangent_basis`: per vertex an orthonormal basis (count × columns,
+  zero columns where a direction is absent) of the pointwise tangent space;
+* :meth:`~FrameManifold.projection` (step 2) and
   :meth:`~FrameManifold.riemannian_gradient` (step 2 and the sphere's tangent);
 * :meth:`~FrameManifold.pushed_off_bound`: the frames a step would push across the
   aspect bound;
@@ -27,9 +29,11 @@ pymanopt's manifolds:
 * :meth:`~FrameManifold.inner` and :meth:`~FrameManifold.norm2`: the metric, reduced over
   MPI ranks.
 
-Arrays are the local rows (owned and ghost, shape (N, 5)) of a P1 frame field; every
+Arrays are the local rows (owned and ghost, shape (N, count)) of a P1 frame field; every
 pointwise operation is deterministic, so ghost rows stay equal to their owners' without
-communication. Only NumPy and MPI reductions: no DOLFINx object is touched here.
+communication. The pointwise maps are the constraints' frame algebra's
+(:mod:`ufl_frames.frames2d.algebra`). Only NumPy and MPI reductions: no DOLFINx object is
+touched here.
 """
 
 from dataclasses import dataclass
@@ -39,7 +43,6 @@ import numpy as np
 from mpi4py import MPI
 
 from ufl_frames.fem.constraints import FrameConstraints
-from ufl_frames.frames2d import odeco
 
 __all__ = ["FrameManifold"]
 
@@ -49,7 +52,7 @@ class FrameManifold:
     """𝓜 for the ``constraints`` of a frame space, on the sphere |x|² = ``radius2``.
 
     ``radius2`` = ρ² = Σ_v m_v |q_v|² over the owned vertices (None: the cone of frames
-    only, for :meth:`project` and the tangent spaces; :meth:`retract` needs ρ).
+    only, for :meth:`closest_point` and the tangent spaces; :meth:`retraction` needs ρ).
     """
 
     constraints: FrameConstraints
@@ -65,6 +68,11 @@ class FrameManifold:
     @property
     def owned(self) -> int:
         return self.constraints.owned
+
+    @property
+    def algebra(self):
+        """The frame algebra of the field (the constraints')."""
+        return self.constraints.algebra
 
     def to_x(self, rows: np.ndarray) -> np.ndarray:
         """x = √m q for the owned rows (the unknowns the solver sees)."""
@@ -90,18 +98,17 @@ class FrameManifold:
                              np.einsum("ni,ni->n", rows[:n], rows[:n])))
         return self.constraints.comm.allreduce(local, op=MPI.SUM)
 
-    # --- points: projection and retraction --------------------------------------------
+    # --- points: closest point and retraction ---------------------------------------------
 
-    def project(self, rows: np.ndarray) -> np.ndarray:
+    def closest_point(self, rows: np.ndarray) -> np.ndarray:
         """Step 4 of note §3: the closest frame at every vertex, with its orientation fixed
-        at boundary and pinned vertices and the aspect bound applied (pointwise)."""
-        c = self.constraints
+        at the fixed rows (boundary, pinned) and the aspect bound applied (pointwise)."""
+        c, algebra = self.constraints, self.algebra
         out = np.empty_like(rows)
-        interior, fixed = c.interior, c.boundary
-        out[interior] = odeco.project(rows[interior], isotropic=c.isotropic,
-                                      max_aspect=c.max_aspect)
-        out[fixed] = odeco.project_aligned(rows[fixed], c.normals, isotropic=c.isotropic,
-                                           max_aspect=c.max_aspect)
+        free, fixed = c.free, c.fixed
+        out[free] = algebra.project(rows[free], isotropic=c.isotropic, max_aspect=c.max_aspect)
+        out[fixed] = algebra.project_aligned(rows[fixed], c.directions, isotropic=c.isotropic,
+                                             max_aspect=c.max_aspect)
         return out
 
     def normalise(self, rows: np.ndarray) -> np.ndarray:
@@ -110,35 +117,40 @@ class FrameManifold:
             raise ValueError("this FrameManifold has no sphere (radius2 is None)")
         return rows * np.sqrt(self.radius2 / self.norm2(rows))
 
-    def retract(self, rows: np.ndarray) -> np.ndarray:
-        """R: steps 4–5 of note §3, the point of 𝓜 that the note's loop takes ``rows`` to."""
-        return self.normalise(self.project(rows))
+    def retraction(self, point: np.ndarray, tangent: np.ndarray | None = None) -> np.ndarray:
+        """R(point + tangent): steps 4–5 of note §3, the point of 𝓜 that the note's loop
+        takes ``point`` moved by ``tangent`` to (rows in q; no ``tangent``: R(point))."""
+        moved = point if tangent is None else point + tangent
+        return self.normalise(self.closest_point(moved))
 
     # --- tangent spaces ----------------------------------------------------------------
 
     def tangent_basis(self, rows: np.ndarray, gradient: np.ndarray | None = None,
                       held: np.ndarray | None = None, only_held: bool = False) -> np.ndarray:
-        """Orthonormal basis (N, 5, 3) of the pointwise tangent space at ``rows`` (on 𝓜).
+        """Orthonormal basis (N, count, columns) of the pointwise tangent space at ``rows``
+        (on 𝓜).
 
-        Columns e_s (total length), e_d (length difference), rotation; zero where the
-        direction is absent: rotation at fixed-orientation vertices, e_d for isotropic
-        frames and for frames on the aspect bound that ``gradient`` pushes outwards
-        (see :func:`ufl_frames.frames2d.aspect.active_bound`; ``held``: rows kept on the
-        bound whatever the gradient; with ``only_held`` the held rows alone are active).
+        In 2D the columns are e_s (total length), e_d (length difference), rotation; zero
+        where the direction is absent: the rotation at fixed rows, e_d (the algebra's
+        anisotropy columns) for isotropic frames and for frames on the aspect bound that
+        ``gradient`` pushes outwards (see :func:`ufl_frames.frames2d.aspect.active_bound`;
+        ``held``: rows kept on the bound whatever the gradient; with ``only_held`` the held
+        rows alone are active).
         Same in q and in x.
         """
-        c = self.constraints
-        basis = odeco.tangent_basis(rows, max_aspect=c.max_aspect, gradient=gradient,
-                                    on_variety=True, held=held, only_held=only_held)
-        basis[c.boundary, :, 2] = 0.0  # orientation held: no rotation
+        c, algebra = self.constraints, self.algebra
+        basis = algebra.tangent_basis(rows, max_aspect=c.max_aspect, gradient=gradient,
+                                      on_variety=True, held=held, only_held=only_held)
+        for column in algebra.rotation_columns:
+            basis[c.fixed, :, column] = 0.0  # orientation held: no rotation
         if c.isotropic:
-            basis[:, :, 1] = 0.0
+            for column in algebra.anisotropy_columns:
+                basis[:, :, column] = 0.0
         return basis
 
-    def tangent_project(self, rows: np.ndarray, dq: np.ndarray,
-                        gradient: np.ndarray | None = None,
-                        held: np.ndarray | None = None,
-                        basis: np.ndarray | None = None, only_held: bool = False) -> np.ndarray:
+    def projection(self, rows: np.ndarray, dq: np.ndarray,
+                   gradient: np.ndarray | None = None, held: np.ndarray | None = None,
+                   basis: np.ndarray | None = None, only_held: bool = False) -> np.ndarray:
         """Step 2 of note §3: the pointwise tangent part of ``dq`` at ``rows``; the active
         aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)
         and ``held`` (``only_held``: see :meth:`tangent_basis`), unless ``basis``
@@ -156,9 +168,15 @@ class FrameManifold:
         tangent). Owned rows, in x. ``held``, ``only_held``: the aspect bound's active set
         as in :meth:`tangent_basis` (``only_held`` with no row held: no bound at all)."""
         n = self.owned
-        tangent = self.tangent_project(rows, gradient_x, held=held, only_held=only_held)[:n]
+        tangent = self.projection(rows, gradient_x, held=held, only_held=only_held)[:n]
         x = self.to_x(rows)
         return tangent - (self.inner(tangent, x) / self.inner(x, x)) * x
+
+    def on_bound(self, basis: np.ndarray) -> np.ndarray:
+        """The rows a tangent basis (:meth:`tangent_basis`) holds on the aspect bound:
+        its anisotropy columns absent (N,) bool."""
+        columns = list(self.algebra.anisotropy_columns)
+        return np.linalg.norm(basis[:, :, columns], axis=(1, 2)) == 0
 
     def pushed_off_bound(self, rows: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Owned rows on the aspect bound that ``step`` (owned rows, in x or q) pushes
@@ -167,16 +185,16 @@ class FrameManifold:
         c, n = self.constraints, self.owned
         if c.isotropic or c.max_aspect is None:
             return np.zeros(n, dtype=bool)
-        return odeco.pushed_off_bound(rows[:n], step[:n], c.max_aspect)
+        return self.algebra.pushed_off_bound(rows[:n], step[:n], c.max_aspect)
 
     # --- curvature ---------------------------------------------------------------------
 
     def curvature_blocks(self, rows: np.ndarray, basis: np.ndarray,
                          gradient_x: np.ndarray) -> np.ndarray:
-        """Per owned vertex the 5 × 5 block B W Bᵀ / m: the pointwise part of the Weingarten
+        """Per owned vertex the count × count block B W Bᵀ / m: the pointwise part of the Weingarten
         map, which the Riemannian Hessian adds to the Euclidean one (in x).
 
-        W (:func:`~ufl_frames.frames2d.odeco.tangent_curvature`) pairs the second
+        W (the algebra's ``tangent_curvature``) pairs the second
         fundamental form of the variety with the normal part of the Euclidean gradient
         in q (``gradient_x`` · √m); zero where the orientation is fixed (the chart is
         linear there). ``basis``: :meth:`tangent_basis` at ``rows`` with ``gradient_x``.
@@ -189,10 +207,10 @@ class FrameManifold:
         normal = gradient_q - np.einsum("nia,na->ni", basis,
                                         np.einsum("nia,ni->na", basis, gradient_q))
         # the active set the basis was made with (e_d absent), whatever decided it
-        active = None if c.isotropic else np.linalg.norm(basis[:, :, 1], axis=1) == 0
-        curvature = odeco.tangent_curvature(rows, normal, c.max_aspect, c.isotropic,
-                                            active_gradient=gradient_x, active=active)
-        curvature[c.boundary] = 0.0
+        active = None if c.isotropic else self.on_bound(basis)
+        curvature = self.algebra.tangent_curvature(rows, normal, c.max_aspect, c.isotropic,
+                                                   active_gradient=gradient_x, active=active)
+        curvature[c.fixed] = 0.0
         blocks = np.einsum("nia,nab,njb->nij", basis, curvature, basis)[:n]
         return blocks / c.weights[:n, None, None]
 

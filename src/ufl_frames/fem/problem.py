@@ -31,7 +31,7 @@ from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
 from ufl_frames.fem.constraints import pin_singularities as _pin_singular_vertices  # noqa: E402
 from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
-from ufl_frames.frames2d import odeco  # noqa: E402
+from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT  # noqa: E402
 
 __all__ = ["Evaluation", "FrameProblem", "frame_problem"]
@@ -39,7 +39,7 @@ __all__ = ["Evaluation", "FrameProblem", "frame_problem"]
 
 @dataclass(frozen=True)
 class Evaluation:
-    """H and its Euclidean gradient ∂H/∂x (local rows, (N, 5); ghost rows are partial
+    """H and its Euclidean gradient ∂H/∂x (local rows, (N, count); ghost rows are partial
     sums, meaningful only pointwise) at one version of ``q``."""
 
     energy: float
@@ -83,13 +83,18 @@ class FrameProblem:
         return self.manifold.radius2
 
     @property
+    def algebra(self):
+        """The frame algebra of q (the constraints')."""
+        return self.manifold.algebra
+
+    @property
     def sqrt_mass(self) -> np.ndarray:
         return self.manifold.sqrt_mass
 
     @property
     def rows(self) -> np.ndarray:
-        """Local rows (owned and ghost) of q, a (N, 5) view."""
-        return self.q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
+        """Local rows (owned and ghost) of q, a (N, count) view."""
+        return self.q.x.array.reshape(-1, self.algebra.count)
 
     @property
     def owned(self) -> int:
@@ -154,14 +159,14 @@ class FrameProblem:
             return
         n = self.owned
         self.rows[:n] = self.manifold.from_x(
-            x.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS))
+            x.getArray(readonly=True).reshape(-1, self.algebra.count))
         self.q.x.scatter_forward()
         self.retract()
         self._mark_synced(x)
 
     def retract(self) -> None:
         """q ← R(q): steps 4–5 of note §3 in place."""
-        self.rows[:] = self.manifold.retract(self.rows)
+        self.rows[:] = self.manifold.retraction(self.rows)
         self._version += 1
         self._synced = None
 
@@ -198,11 +203,11 @@ class FrameProblem:
             return self._evaluated[1]
         b = fem.assemble_vector(self.gradient)
         b.scatter_reverse(dolfinx.la.InsertMode.add)
-        owned = odeco.NUM_COEFFICIENTS * self.owned
+        owned = self.algebra.count * self.owned
         H = self.constraints.comm.allreduce(
             float(np.dot(b.array[:owned], self.q.x.array[:owned])), op=MPI.SUM) / 4
         # Ghost rows of b are partial sums: used pointwise (active sets), never summed.
-        gradient_x = b.array.reshape(-1, odeco.NUM_COEFFICIENTS) / self.sqrt_mass[:, None]
+        gradient_x = b.array.reshape(-1, self.algebra.count) / self.sqrt_mass[:, None]
         result = Evaluation(energy=H, gradient_x=gradient_x)
         if self._tracking:
             self._evaluated = (self._version, result)
@@ -224,34 +229,48 @@ def frame_problem(
     boundary_angles: np.ndarray | None = None,
     constraints: FrameConstraints | None = None,
     pin_radius: float = 0.0,
+    algebra=ALGEBRA,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
-    The sphere of 𝓜 is through the projection of ``q`` (step 5 keeps its lumped L²
-    norm). With ``pin_singularities`` the cross orientation is held at the vertices of
-    the singular triangles of ``q`` and at every vertex closer than ``pin_radius`` to
-    one (see :func:`~ufl_frames.fem.constraints.pin_singularities`).
-    ``max_aspect`` bounds l_max/l_min of non-isotropic frames (``math.inf`` or None: no
-    bound, which the non-isotropic energy answers with degenerate frames; see
-    :mod:`ufl_frames.frames2d.aspect`). ``boundary_angles``: exact boundary cross angles
-    per local row (see :func:`~ufl_frames.fem.constraints.frame_constraints`).
-    ``constraints`` already found for ``q``'s space (e.g. the MBO field's) are reused,
-    with ``isotropic`` and ``max_aspect`` set from here; ``boundary_angles`` is then not
-    needed.
+    The sphere of 𝓜 is through the closest point of ``q`` (step 5 keeps its lumped L²
+    norm).
+
+    Args:
+        q: The frame field (:func:`~ufl_frames.fem.energy.frame_space`); set to its
+            retraction.
+        isotropic: Whether the frames are isotropic (l1 = l2).
+        pin_singularities: Hold the cross orientation at the vertices of the singular
+            triangles of ``q`` and at every vertex closer than ``pin_radius`` to one (see
+            :func:`~ufl_frames.fem.constraints.pin_singularities`).
+        max_aspect: The bound l_max/l_min of non-isotropic frames (``math.inf`` or None:
+            no bound, which the non-isotropic energy answers with degenerate frames; see
+            :mod:`ufl_frames.frames2d.aspect`).
+        boundary_angles: Exact boundary cross angles per local row (see
+            :func:`~ufl_frames.fem.constraints.frame_constraints`).
+        constraints: Constraints already found for ``q``'s space (e.g. the MBO field's),
+            reused with ``isotropic`` and ``max_aspect`` set from here;
+            ``boundary_angles`` is then not needed.
+        pin_radius: See ``pin_singularities``.
+        algebra: The frame algebra of ``q`` (that of ``constraints`` where given).
+
+    Returns:
+        The problem, ``q`` on 𝓜.
     """
     V = q.function_space
     if constraints is None:
         constraints = frame_constraints(V, isotropic=isotropic, max_aspect=max_aspect,
-                                        boundary_angles=boundary_angles)
+                                        boundary_angles=boundary_angles, algebra=algebra)
     else:
         constraints = constraints.for_frames(isotropic, max_aspect)
-    rows = q.x.array.reshape(-1, odeco.NUM_COEFFICIENTS)
+    algebra = constraints.algebra
+    rows = q.x.array.reshape(-1, algebra.count)
     if pin_singularities:
         constraints = _pin_singular_vertices(V, constraints, rows, radius=pin_radius)
-    cone = FrameManifold(constraints)  # no sphere yet: it passes through the projection
-    projected = cone.project(rows)
+    cone = FrameManifold(constraints)  # no sphere yet: it passes through the closest point
+    projected = cone.closest_point(rows)
     manifold = FrameManifold(constraints, radius2=cone.norm2(projected))
-    H = energy.integrability_energy_form(q)
+    H = energy.integrability_energy_form(q, algebra)
     problem = FrameProblem(
         q=q,
         manifold=manifold,

@@ -22,12 +22,16 @@ Pure NumPy; the UFL form of the same formula is :func:`ufl_frames.fem.energy.lie
 import numpy as np
 
 from ufl_frames.frames2d._bracket_table import BRACKET_ENTRIES, NULLITY
+from ufl_frames.frames2d.odeco import NUM_COEFFICIENTS
+
+#: The dimension: [u, v] and the derivatives ∂_k have this many components.
+_DIM = 2
 
 __all__ = ["BRACKET_ENTRIES", "BRACKET_TENSOR", "NULLITY", "lie_bracket", "lie_bracket_direct"]
 
 
 def _dense(entries) -> np.ndarray:
-    tensor = np.zeros((2, 5, 2, 5))
+    tensor = np.zeros((_DIM, NUM_COEFFICIENTS, _DIM, NUM_COEFFICIENTS))
     for index, value in entries.items():
         tensor[index] = value
     return tensor
@@ -41,7 +45,8 @@ def lie_bracket(q, grad_q) -> np.ndarray:
     """[u, v] (N, 2) from q (N, 5) and its gradient ∂q_j/∂x_k (N, 5, 2) (note eq. 10)."""
     q = np.asarray(q, dtype=np.float64)
     grad_q = np.asarray(grad_q, dtype=np.float64)
-    if q.ndim != 2 or q.shape[1] != 5 or grad_q.shape != (q.shape[0], 5, 2):
+    n = NUM_COEFFICIENTS
+    if q.ndim != 2 or q.shape[1] != n or grad_q.shape != (q.shape[0], n, _DIM):
         raise ValueError(f"need q (N, 5) and grad_q (N, 5, 2), got {q.shape} and {grad_q.shape}")
     return np.einsum("ijkl,nl,njk->ni", BRACKET_TENSOR, q, grad_q)
 

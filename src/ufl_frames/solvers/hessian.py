@@ -23,7 +23,6 @@ from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem import kernels  # noqa: E402
 from ufl_frames.fem.problem import Evaluation, FrameProblem  # noqa: E402
-from ufl_frames.frames2d import odeco  # noqa: E402
 
 __all__ = ["DEFAULT_DAMPING", "HYBRID_SWITCH", "GaussNewtonModel", "ReducedFactorPC"]
 
@@ -124,11 +123,6 @@ def _ptap(A: PETSc.Mat, P: PETSc.Mat, result: PETSc.Mat | None = None) -> PETSc.
         return A.PtAP(P)
 
 
-def _on_bound(basis: np.ndarray) -> np.ndarray:
-    """The rows a tangent basis (N, 5, 3) holds on the aspect bound: no e_d column."""
-    return np.linalg.norm(basis[:, :, 1], axis=1) == 0
-
-
 class GaussNewtonModel:
     r"""Riemannian (Gauss–)Newton Hessian of H on 𝓜, with Sobolev (H¹) damping.
 
@@ -161,7 +155,7 @@ class GaussNewtonModel:
     replaced by the full Hessian ∇²H (the second derivative of H's UFL form, by the
     compiled kernel), and the curvature of the constraint set is added: per vertex the
     second fundamental form of the variety paired with the normal part of the gradient
-    (:func:`odeco.tangent_curvature`, zero where the orientation is fixed), and −4H/ρ² on
+    (the algebra's ``tangent_curvature``, zero where the orientation is fixed), and −4H/ρ² on
     the sphere's tangent space (x·∇H = 4H).
     At a critical point this is the Riemannian Hessian (tested against second
     differences of H∘R to 1e-7): Newton then converges quadratically even where the
@@ -229,8 +223,7 @@ class GaussNewtonModel:
         second 5N × 5N matrix to add (at 1e5 triangles its MatAXPY took 5 % of a step).
         Both are the hand-written kernels of :mod:`ufl_frames.fem.kernels`: the same
         matrices as the UFL forms (``energy.gauss_newton_form``, the second derivative of
-        H, plus :func:`sobolev_form`) to round-off, assembled in 0.21 / 0.30 s instead of
-        0.46 / 0.48 s at 10⁵ triangles.
+        H, plus :func:`sobolev_form`) to round-off, assembled in about half the time.
 
         The lean model assembles the reduced matrix Tᵀ G T itself
         (:func:`kernels.reduced_model_form`, T scaled by W⁻¹), with no 5N × 5N matrix G
@@ -238,9 +231,11 @@ class GaussNewtonModel:
         if self.lean:
             return kernels.reduced_model_form(self.problem.q, self.scaled_basis,
                                               self.reduced_space,
-                                              self.damping_weight, self.inverse_area, exact)
+                                              self.damping_weight, self.inverse_area, exact,
+                                              algebra=self.problem.algebra)
         make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
-        return make(self.problem.q, self.damping_weight, self.inverse_area)
+        return make(self.problem.q, self.damping_weight, self.inverse_area,
+                    algebra=self.problem.algebra)
 
     def _create(self, template: PETSc.Vec) -> None:
         problem = self.problem
@@ -250,7 +245,7 @@ class GaussNewtonModel:
         if self.lean:  # the reduced matrix's space and the basis T W⁻¹ (5 × c a vertex)
             columns = len(self._columns())
             self.scaled_basis = fem.Function(fem.functionspace(
-                mesh, ("Lagrange", 1, (odeco.NUM_COEFFICIENTS * columns,))))
+                mesh, ("Lagrange", 1, (problem.algebra.count * columns,))))
             self.reduced_space = fem.functionspace(mesh, ("Lagrange", 1, (columns,)))
         self.product_form, self.direction = None, None  # see _model_product
         self.form = self._model_form(self.exact)
@@ -260,7 +255,7 @@ class GaussNewtonModel:
             self.gauss_newton = dolfinx.fem.petsc.create_matrix(self.form)
         self.unscale = template.duplicate()
         inverse = 1.0 / problem.sqrt_mass[: problem.owned]
-        self.unscale.getArray()[:] = np.repeat(inverse, odeco.NUM_COEFFICIENTS)
+        self.unscale.getArray()[:] = np.repeat(inverse, problem.algebra.count)
         self.xhat, self.work = template.duplicate(), template.duplicate()
         self.mu, self.shift_value, self.lam, self.gnorm0 = 1.0, 0.0, 0.0, None
         # tangent, normal, curvature: block-diagonal, reused; unshifted: copy of the
@@ -303,7 +298,7 @@ class GaussNewtonModel:
         basis = manifold.tangent_basis(problem.rows, evaluation.gradient_x, held=problem.held,
                                       only_held=problem.held_only)
         if not problem.constraints.isotropic:  # frames held on the aspect bound (no e_d)
-            self.active = _on_bound(basis)
+            self.active = manifold.on_bound(basis)
         self._basis = basis[:n]  # for reduced_operator (the tangent basis of this model)
         if self.exact:
             self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
@@ -334,7 +329,7 @@ class GaussNewtonModel:
         index_map, comm = problem.q.function_space.dofmap.index_map, problem.constraints.comm
         blocks = np.einsum("nik,njk->nij", basis, basis)
         self.tangent = _block_diagonal(blocks, index_map, comm, self.tangent)
-        identity = np.eye(odeco.NUM_COEFFICIENTS)
+        identity = np.eye(problem.algebra.count)
         self.normal = _block_diagonal(identity - blocks, index_map, comm, self.normal)
         result = _ptap(G, self.tangent, result)
         diagonal, dofs = result.getDiagonal(), self.tangent.getDiagonal()
@@ -385,9 +380,13 @@ class GaussNewtonModel:
         return self.basis_matrix, self.reduced_matrix
 
     def _columns(self) -> list[int]:
-        """The tangent basis' columns that are unknowns of R: e_s, e_d and the rotation;
-        isotropic frames have no e_d."""
-        return [0, 2] if self.problem.constraints.isotropic else [0, 1, 2]
+        """The tangent basis' columns that are unknowns of R: all of them (2D: e_s, e_d and
+        the rotation), less the anisotropy columns for isotropic frames (no e_d)."""
+        algebra = self.problem.algebra
+        columns = range(algebra.tangent_columns)
+        if not self.problem.constraints.isotropic:
+            return list(columns)
+        return [k for k in columns if k not in algebra.anisotropy_columns]
 
     def _build_reduced(self) -> None:
         """T and R = Tᵀ G T (+ the reduced curvature) + μ E at the current q and basis, no
@@ -501,7 +500,7 @@ class GaussNewtonModel:
             pc.apply(g, work)  # ≈ B⁻¹ g: the Newton direction is −work
             return self.problem.manifold.pushed_off_bound(
                 self.problem.rows,
-                -work.getArray(readonly=True).reshape(-1, odeco.NUM_COEFFICIENTS))
+                -work.getArray(readonly=True).reshape(-1, self.problem.algebra.count))
         finally:
             if step is None:
                 work.destroy()
@@ -524,7 +523,7 @@ class GaussNewtonModel:
         if free is None:
             free = problem.manifold.tangent_basis(problem.rows,
                                                   problem.evaluation().gradient_x)
-        held = _on_bound(free) | self.active
+        held = problem.manifold.on_bound(free) | self.active
         if self.released is not None:
             held &= ~self.released
             self.released = None
@@ -588,7 +587,7 @@ class GaussNewtonModel:
                 if round_ == 0:
                     self._model_product(step, product)  # G (−δ)
                     model_gradient = unbounded - product.getArray(readonly=True).reshape(
-                        -1, odeco.NUM_COEFFICIENTS)
+                        -1, problem.algebra.count)
                     # the multiplier ≥ 0 where the model gradient still pushes outwards
                     released = self.active[:n] & ~manifold.pushed_off_bound(rows,
                                                                             -model_gradient)
@@ -629,7 +628,8 @@ class GaussNewtonModel:
             self.product_vector = dolfinx.fem.petsc.create_vector(problem.q.function_space)
         if self.product_form is None or self.product_form[0] != self.exact:
             form = kernels.model_action_form(problem.q, self.direction, self.damping_weight,
-                                             self.inverse_area, self.exact)
+                                             self.inverse_area, self.exact,
+                                             algebra=problem.algebra)
             self.product_form = (self.exact, form)
         self.direction.x.petsc_vec.pointwiseMult(v, self.unscale)  # d = W⁻¹ v
         self.direction.x.scatter_forward()
@@ -668,7 +668,7 @@ class GaussNewtonModel:
         if free is None:
             return False
         problem = self.problem
-        active = _on_bound(free)
+        active = problem.manifold.on_bound(free)
         n = problem.owned
         new = bool(np.any(active[:n] & ~self.active[:n]))
         return problem.constraints.comm.allreduce(new, op=MPI.LOR)
@@ -693,8 +693,8 @@ class GaussNewtonModel:
             return
         manifold, rows = problem.manifold, problem.rows
         gradient = problem.evaluation().gradient_x
-        free = manifold.tangent_project(rows, gradient, basis=free)
-        face = manifold.tangent_project(rows, gradient, held=self.active)
+        free = manifold.projection(rows, gradient, basis=free)
+        face = manifold.projection(rows, gradient, held=self.active)
         on_face = np.sqrt(manifold.inner(face, face))
         released = np.sqrt(manifold.inner(free - face, free - face))
         if released == 0.0 or released > self.release * on_face:

@@ -36,7 +36,6 @@ from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.constraints import FrameConstraints, frame_constraints  # noqa: E402
 from ufl_frames.fem.scales import length_scales  # noqa: E402
-from ufl_frames.frames2d import odeco  # noqa: E402
 
 
 def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
@@ -45,11 +44,6 @@ def diffusion_schedule(mesh, levels: int | None = None) -> list[float]:
     if levels is None:
         levels = max(1, math.ceil(math.log2(diameter / 4 / h)) + 1)
     return [(diameter / 4 / 2**k) ** 2 for k in range(levels)]
-
-
-def _unit_isotropic(q: np.ndarray) -> np.ndarray:
-    _, angles = odeco.q_to_frames(odeco.project(q, isotropic=True))
-    return odeco.frames_to_q(np.ones((q.shape[0], 2)), angles)
 
 
 def mbo_frame_field(
@@ -65,28 +59,31 @@ def mbo_frame_field(
     ``monitor(level, tau, change)`` is called after each level when given (change:
     the largest pointwise change of q in the last sweep, max over ranks).
 
-    The diffusion does not couple the five coefficients, so it is solved on the scalar P1
+    The diffusion does not couple the coefficients, so it is solved on the scalar P1
     space, one coefficient after the other, with one matrix and preconditioner per level
-    (a fifth of the rows of the blocked system; on 10⁵ triangles 4x faster).
+    (in 2D a fifth of the rows of the blocked system, and faster).
+
+    The constraints' fixed rows (the boundary, and any pinned or prescribed rows) are
+    held at the unit frames of their directions; the frame algebra is the constraints'.
     """
     mesh = V.mesh
     if constraints is None:
         constraints = frame_constraints(V)
-    k = odeco.NUM_COEFFICIENTS
+    algebra = constraints.algebra
+    k = algebra.count
     S, to_blocked = V.sub(0).collapse()
     row_of = np.asarray(to_blocked, dtype=np.int64) // k  # S dof -> vertex row of V
-    is_boundary = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, bool)
-    is_boundary[constraints.boundary] = True
-    boundary_dofs = np.flatnonzero(is_boundary[row_of]).astype(np.int32)
+    is_fixed = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, bool)
+    is_fixed[constraints.fixed] = True
+    fixed_dofs = np.flatnonzero(is_fixed[row_of]).astype(np.int32)
 
     q = fem.Function(V, name="q")
     rows = q.x.array.reshape(-1, k)
-    angles = np.arctan2(constraints.normals[:, 1], constraints.normals[:, 0])
-    rows[constraints.boundary] = odeco.frames_to_q(np.ones((angles.size, 2)), angles)
-    boundary_values = [fem.Function(S) for _ in range(k)]
-    for j, g in enumerate(boundary_values):
+    rows[constraints.fixed] = algebra.unit_frames(constraints.directions)
+    fixed_values = [fem.Function(S) for _ in range(k)]
+    for j, g in enumerate(fixed_values):
         g.x.array[:] = rows[row_of, j]
-    bcs = [fem.dirichletbc(g, boundary_dofs) for g in boundary_values]
+    bcs = [fem.dirichletbc(g, fixed_dofs) for g in fixed_values]
 
     tau = fem.Constant(mesh, PETSc.ScalarType(1.0))
     u, w = ufl.TrialFunction(S), ufl.TestFunction(S)
@@ -114,7 +111,7 @@ def mbo_frame_field(
         with petsc_defaults(options_prefix, defaults):
             ksp.setFromOptions()
 
-        interior = constraints.interior
+        free = constraints.free
         for level, tau_value in enumerate(diffusion_schedule(mesh, levels)):
             tau.value = tau_value
             A.zeroEntries()
@@ -140,7 +137,7 @@ def mbo_frame_field(
                         )
                     component.x.scatter_forward()
                     rows[row_of, j] = component.x.array
-                rows[interior] = _unit_isotropic(rows[interior])
+                rows[free] = algebra.closest_unit_isotropic(rows[free])
                 local = float(np.abs(rows - before).max(initial=0.0))
                 change = mesh.comm.allreduce(local, op=MPI.MAX)
             if monitor is not None:
