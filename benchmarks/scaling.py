@@ -64,12 +64,13 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
             quads: bool = False, levels: int | str = "auto", nested_meshes: bool = False) -> dict:
     """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0).
 
-    With ``levels`` > 1 (or 'auto', the CLI's default rule :func:`ufl_frames.cli.auto_levels`,
-    when that gives more than one), nested iteration (:meth:`FrameField.nested`): ``mesh``
-    meshes every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``),
-    and the Newton and Krylov counts are the finest level's (every level's in ``levels``);
-    with ``nested_meshes`` the levels are :func:`ufl_frames.geometry.build_nested`'s (the
-    coarsest split, as ``ufl-frames solve --nested-meshes``) instead of meshed by Gmsh."""
+    With ``levels`` > 1 (or 'auto', the CLI's default rule, when that gives more than one),
+    nested iteration (:meth:`FrameField.nested`) over the meshes of
+    :func:`ufl_frames.mesh.hierarchy.nested_domains`: ``mesh`` meshes every level, ``mbo``
+    is 0 (MBO runs on the coarsest mesh, inside ``solve``), and the Newton and Krylov
+    counts are the finest level's (every level's in ``levels``); with ``nested_meshes``
+    the levels are :func:`ufl_frames.geometry.build_nested`'s (the coarsest split, as
+    ``ufl-frames solve --nested-meshes``) instead of meshed by Gmsh."""
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc([sys.argv[0], *petsc_argv])
@@ -78,7 +79,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     from mpi4py import MPI
 
     from ufl_frames import geometry
-    from ufl_frames.cli import auto_levels
+    from ufl_frames.mesh.hierarchy import nested_domains
     from ufl_frames.pipeline import FrameField
 
     comm = MPI.COMM_WORLD
@@ -97,10 +98,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 
     def meshes():
         fine = geometry.build(comm, shape, h)
-        count = auto_levels(fine.num_cells) if levels == "auto" else int(levels)
-        if nested_meshes and count > 1:
-            return geometry.build_nested(comm, shape, count, h)
-        return [geometry.build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)] + [fine]
+        count = levels if levels == "auto" else int(levels)
+        return nested_domains(comm, shape, fine, count, h, nested_meshes=nested_meshes)
 
     domains = stage("mesh", meshes)
     domain = domains[-1]

@@ -17,6 +17,7 @@ from ufl_frames.bootstrap import options_scope
 from ufl_frames.fem import energy
 from ufl_frames.fem.transfer import interpolate_field
 from ufl_frames.frames2d import odeco
+from ufl_frames.mesh import hierarchy
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers import tao
 
@@ -295,11 +296,11 @@ def test_nested_run_interrupted_on_the_fine_mesh_resumes_to_the_same_result(tmp_
 
 def test_auto_levels_keeps_the_coarsest_mesh_above_the_threshold():
     """A quarter of the triangles per level, the coarsest at NESTED_COARSEST or more."""
-    assert cli.auto_levels(1887) == 1
-    assert cli.auto_levels(4 * cli.NESTED_COARSEST - 1) == 1
-    assert cli.auto_levels(4 * cli.NESTED_COARSEST) == 2
-    assert cli.auto_levels(29597) == 3
-    assert cli.auto_levels(10**12) == cli.MAX_LEVELS
+    assert hierarchy.auto_levels(1887) == 1
+    assert hierarchy.auto_levels(4 * hierarchy.NESTED_COARSEST - 1) == 1
+    assert hierarchy.auto_levels(4 * hierarchy.NESTED_COARSEST) == 2
+    assert hierarchy.auto_levels(29597) == 3
+    assert hierarchy.auto_levels(10**12) == hierarchy.MAX_LEVELS
 
 
 def test_run_solve_auto_levels_nests_a_fine_mesh(tmp_path):
@@ -365,22 +366,24 @@ def test_nested_meshes_fall_back_one_level_when_the_coarsest_fails(monkeypatch):
     monkeypatch.setattr(geometry, "build_nested", build_nested)
     domain = geometry.build(COMM, "piano", mesh_size=0.05)
     said = []
-    coarse, fine = cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, True,
-                                      said.append)
+    *coarse, fine = hierarchy.nested_domains(COMM, "piano", domain, 3, 0.05,
+                                             nested_meshes=True, drop_failing=True,
+                                             say=said.append)
     assert len(coarse) == 1 and fine.num_cells == 4 * coarse[0].num_cells
     assert any("too coarse to mesh: one level fewer" in line for line in said)
-    with pytest.raises(cli.InputError, match="--levels 3 --nested-meshes: too coarse"):
-        cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, False, said.append)
+    with pytest.raises(geometry.GeometryError, match="--levels 3 --nested-meshes: too coarse"):
+        hierarchy.nested_domains(COMM, "piano", domain, 3, 0.05, nested_meshes=True,
+                                 say=said.append)
 
 
 def test_a_coarse_level_must_keep_the_holes():
     from types import SimpleNamespace
 
     with pytest.raises(geometry.GeometryError, match="Euler characteristic 1, not 0"):
-        cli._check_same_topology(SimpleNamespace(euler_characteristic=1),
-                                 SimpleNamespace(euler_characteristic=0), 4)
-    cli._check_same_topology(SimpleNamespace(euler_characteristic=0),
-                             SimpleNamespace(euler_characteristic=0), 4)
+        hierarchy.check_same_topology(SimpleNamespace(euler_characteristic=1),
+                                      SimpleNamespace(euler_characteristic=0), 4)
+    hierarchy.check_same_topology(SimpleNamespace(euler_characteristic=0),
+                                  SimpleNamespace(euler_characteristic=0), 4)
 
 
 def test_checkpoints_without_a_pin_radius_resume_as_radius_zero(tmp_path):

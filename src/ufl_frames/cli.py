@@ -64,6 +64,7 @@ from ufl_frames import __version__, interrupts
 from ufl_frames.bootstrap import init_petsc, options_scope, petsc_initialised
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
 from ufl_frames.interrupts import INTERRUPTED_STATUS, Interrupted
+from ufl_frames.mesh.hierarchy import MAX_LEVELS, check_levels, nested_domains
 from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
 
 PROG = "ufl-frames"
@@ -394,13 +395,6 @@ def default_output_folder(geometry: str) -> Path:
 # --- the pipeline -------------------------------------------------------------------------
 
 
-#: At most this many levels of nested iteration (each halves the mesh size).
-MAX_LEVELS = 8
-#: ``--levels auto`` keeps the coarsest mesh at this many triangles or more: below, MBO's
-#: singularities and the coarse solution are too far from the fine mesh's to help.
-NESTED_COARSEST = 1500
-
-
 def _finite_real(value) -> bool:
     """Whether ``value`` is a finite int or float (not a bool)."""
     real = isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -420,31 +414,6 @@ def _check_pin_radius(pin_radius, free_singularities: bool) -> None:
     if pin_radius > 0 and free_singularities:
         raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
                          "with --free-singularities")
-
-
-def auto_levels(num_cells: int) -> int:
-    """The levels of ``--levels auto`` for a finest mesh of ``num_cells`` triangles: as
-    many halvings of the mesh size as keep the coarsest mesh at :data:`NESTED_COARSEST`
-    triangles or more (a quarter of the triangles per level), at most :data:`MAX_LEVELS`."""
-    levels = 1
-    while levels < MAX_LEVELS and num_cells / 4.0**levels >= NESTED_COARSEST:
-        levels += 1
-    return levels
-
-
-def _check_levels(levels, geometry: str, conformal: bool) -> None:
-    """What nested iteration needs: a whole number of levels, a geometry Gmsh meshes."""
-    if levels == "auto":
-        return
-    if isinstance(levels, bool) or not isinstance(levels, int) or not 0 < levels <= MAX_LEVELS:
-        raise InputError(f"levels must be 'auto' or an integer from 1 to {MAX_LEVELS}, "
-                         f"got {levels!r}")
-    if levels == 1:
-        return
-    if str(geometry).lower().endswith(".msh"):
-        raise InputError("--levels needs a geometry Gmsh can mesh at several sizes, not a .msh")
-    if conformal:
-        raise InputError("--levels and --conformal cannot be combined (no TAO solve to nest)")
 
 
 def run_solve(
@@ -509,7 +478,10 @@ def run_solve(
         out = resume
     out = default_output_folder(geometry) if out is None else Path(out)
     _check_parameters(mesh_size, max_it)
-    _check_levels(levels, geometry, conformal)
+    try:
+        check_levels(levels, geometry, conformal)
+    except ValueError as e:
+        raise InputError(str(e)) from e
     _check_pin_radius(pin_radius, free_singularities)
     problem = petsc_option_problem(user_options)
     if problem is not None:
@@ -539,28 +511,13 @@ def run_solve(
         raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
     except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
-    automatic = levels == "auto"
-    if automatic:
-        can_coarsen = not (conformal or geometry.lower().endswith(".msh"))
-        levels = auto_levels(domain.num_cells) if can_coarsen else 1
-    coarse = []  # nested iteration: the coarser meshes, coarsest first
-    if nested_meshes:
-        coarse, domain = _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor,
-                                        limit, automatic, say)
-    else:  # every level meshed by Gmsh
-        for k in range(levels - 1, 0, -1):
-            say(f"meshing level {levels - 1 - k} (size factor {2**k:g}) ...")
-            try:
-                level = geometry_module.build(comm, geometry, mesh_size, size_factor * 2**k,
-                                              **limit)
-                _check_same_topology(level, domain, 2**k)
-            except geometry_module.GeometryError as e:
-                if not automatic:
-                    raise InputError(f"level {levels - 1 - k} of --levels: {e}") from e
-                say(f"  note: no coarser level: {e}")
-                coarse = []  # the coarser levels are worse still: start from the finer ones
-                continue
-            coarse.append(level)
+    try:
+        domains = nested_domains(comm, geometry, domain, 1 if conformal and levels == "auto"
+                                 else levels, mesh_size, size_factor,
+                                 nested_meshes=nested_meshes, say=say, **limit)
+    except geometry_module.GeometryError as e:  # raised identically on every rank
+        raise InputError(str(e)) from e
+    coarse, domain = domains[:-1], domains[-1]  # nested iteration: coarsest first
     interrupts.set_stage("the MBO initial field")
     interrupts.checkpoint(comm)
     for note in domain.notes:
@@ -593,41 +550,6 @@ def run_solve(
 #: PETSc options that change what a run prints, not what it computes: not compared
 #: when resuming.
 _OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info$")
-
-
-def _check_same_topology(level, domain, factor) -> None:
-    """A coarse level of nested iteration must keep the domain's holes and thin parts."""
-    from ufl_frames.geometry import GeometryError
-
-    if level.euler_characteristic != domain.euler_characteristic:
-        raise GeometryError(f"at size factor {factor:g} the mesh has Euler characteristic "
-                            f"{level.euler_characteristic}, not {domain.euler_characteristic} "
-                            "(a hole or a thin part is lost)")
-
-
-def _nested_meshes(comm, geometry, domain, levels, mesh_size, size_factor, limit, automatic,
-                   say):
-    """(coarser levels, finest) of :func:`ufl_frames.geometry.build_nested` for ``--levels``
-    with ``--nested-meshes``; ``domain`` (the mesh at the requested size) where there is one
-    level only. ``automatic``: a coarsest mesh that fails or loses a hole means one level
-    fewer, not an :class:`InputError`."""
-    from ufl_frames import geometry as geometry_module
-
-    while levels > 1:
-        say(f"meshing {levels} nested levels (the coarsest at size factor "
-            f"{2**(levels - 1):g}, split {levels - 1} time(s)) ...")
-        try:
-            hierarchy = geometry_module.build_nested(comm, geometry, levels, mesh_size,
-                                                     size_factor, **limit)
-            _check_same_topology(hierarchy[0], domain, 2**(levels - 1))
-        except geometry_module.GeometryError as e:
-            if not automatic:
-                raise InputError(f"--levels {levels} --nested-meshes: {e}") from e
-            say(f"  note: {e}: one level fewer")
-            levels -= 1
-            continue
-        return hierarchy[:-1], hierarchy[-1]
-    return [], domain
 
 
 def _run_record(geometry: str, comm, **arguments) -> dict:
