@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import cli, geometry
+from ufl_frames import geometry
+from ufl_frames.app.run import RunConfig, run
 from ufl_frames.fem import energy
 from ufl_frames.fem.conformal import conformal_field
 from ufl_frames.frames2d import odeco
@@ -91,8 +92,8 @@ def test_piano_conformal_field_integrates_and_is_the_same_on_any_ranks():
 
 def test_cli_conformal_runs_no_tao(tmp_path):
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "c"
-    summary = cli.run_solve("piano", mesh_size=0.1, out=out, quiet=True, comm=COMM,
-                            conformal=True, param=True)
+    summary = run(RunConfig("piano", mesh_size=0.1, out=out, quiet=True, conformal=True,
+                            param=True), comm=COMM)
     assert summary["isotropic"] and summary["conformal_scale"]
     assert summary["tao_type"] is None and "iterations" not in summary
     assert "convergence.png" not in summary["files"]

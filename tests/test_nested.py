@@ -12,7 +12,10 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ufl_frames import cli, geometry, solvers
+from ufl_frames import geometry, solvers
+from ufl_frames.app import cli
+from ufl_frames.app.failures import InputError
+from ufl_frames.app.run import RunConfig, run
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.fem import energy
 from ufl_frames.fem.transfer import interpolate_field
@@ -239,15 +242,15 @@ def test_pin_radius_refuses_bad_values(argv, status, words, tmp_path, capsys):
     ({"levels": 2, "conformal": True}, "--conformal"),
 ])
 def test_run_solve_refuses_bad_levels(arguments, words, tmp_path):
-    with pytest.raises(cli.InputError, match=words):
-        cli.run_solve("piano", mesh_size=0.2, out=tmp_path / "out", quiet=True, comm=COMM,
-                      **arguments)
+    with pytest.raises(InputError, match=words):
+        run(RunConfig("piano", mesh_size=0.2, out=tmp_path / "out", quiet=True,
+                      **arguments), comm=COMM)
 
 
 def test_run_solve_refuses_levels_on_a_msh(tmp_path):
-    with pytest.raises(cli.InputError, match="not a .msh"):
-        cli.run_solve(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
-                      quiet=True, comm=COMM)
+    with pytest.raises(InputError, match="not a .msh"):
+        run(RunConfig(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
+                      quiet=True), comm=COMM)
 
 
 def test_nested_run_interrupted_on_the_fine_mesh_resumes_to_the_same_result(tmp_path,
@@ -307,7 +310,7 @@ def test_run_solve_auto_levels_nests_a_fine_mesh(tmp_path):
     """The default (--levels auto) on 7.5e3 triangles: two meshes, 1887 then 7539 triangles,
     each meshed by Gmsh, and the result converged on the fine one."""
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
-    summary = cli.run_solve("piano", mesh_size=0.025, out=out, quiet=True, comm=COMM)
+    summary = run(RunConfig("piano", mesh_size=0.025, out=out, quiet=True), comm=COMM)
     assert [e["triangles"] for e in summary["levels"]] == [1887, summary["num_cells"]]
     assert summary["converged"]
     assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]
@@ -320,7 +323,7 @@ def test_default_solve_stays_within_the_growth_bound(tmp_path):
     at most 1.3x per 2x refinement (measured: 14 and 14 steps, 2 iterations a step at
     both; one mesh at h = 0.025 took 39 steps, before the hybrid model 72 against 45)."""
     root = Path(COMM.bcast(str(tmp_path), root=0))
-    runs = [cli.run_solve("piano", mesh_size=h, out=root / f"h{h}", quiet=True, comm=COMM)
+    runs = [run(RunConfig("piano", mesh_size=h, out=root / f"h{h}", quiet=True), comm=COMM)
             for h in (0.05, 0.025)]
     steps = [s["iterations"] for s in runs]
     assert "levels" not in runs[0] and len(runs[1]["levels"]) == 2
@@ -339,8 +342,8 @@ def test_run_solve_nested_meshes_splits_the_coarsest(tmp_path):
     """--nested-meshes: the fine mesh is the coarse one split once (4x its triangles), a
     converged solve there from the coarse solution, MBO's singularities kept."""
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
-    summary = cli.run_solve("piano", mesh_size=0.05, out=out, quiet=True, comm=COMM, levels=2,
-                            nested_meshes=True)
+    summary = run(RunConfig("piano", mesh_size=0.05, out=out, quiet=True, levels=2,
+                            nested_meshes=True), comm=COMM)
     coarse, fine = (e["triangles"] for e in summary["levels"])
     assert fine == 4 * coarse == summary["num_cells"]
     assert summary["converged"]

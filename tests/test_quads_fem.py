@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import cli, geometry
+from ufl_frames import geometry
+from ufl_frames.app.failures import RunError
+from ufl_frames.app.run import RunConfig, run
 from ufl_frames.pipeline import FrameField
 
 COMM = MPI.COMM_WORLD
@@ -76,8 +78,8 @@ def test_quad_files_read_back(piano_fields, tmp_path):
 
 def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     out = Path(COMM.bcast(str(tmp_path), root=0))
-    summary = cli.run_solve("annulus", mesh_size=0.1, max_it=50, out=out / "a", quiet=True,
-                            comm=COMM, quads=True, quad_size=0.1)
+    summary = run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "a", quiet=True,
+                            quads=True, quad_size=0.1), comm=COMM)
     assert {"quads.msh", "quads.vtu", "quads.png"} <= set(summary["files"])
     found = summary["quads"]
     assert found["valid"] and found["irregular_vertices"] == 0
@@ -85,8 +87,8 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     n_theta = found["vertices"] - found["quads"]
     assert n_theta >= 8 and found["quads"] % n_theta == 0
     assert found["interior_valence"] == {"4": found["quads"] - n_theta}
-    with pytest.raises(cli.RunError, match="cannot make quads of this field: .*quad size"):
-        cli.run_solve("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True,
-                      comm=COMM, quads=True, quad_size=2.0)
+    with pytest.raises(RunError, match="cannot make quads of this field: .*quad size"):
+        run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True, quads=True,
+                      quad_size=2.0), comm=COMM)
     COMM.Barrier()  # rank 0 removes what the run wrote (its checkpoint folder)
     assert not (out / "b").exists()
