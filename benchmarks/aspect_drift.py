@@ -113,7 +113,7 @@ def probe(field, trace: dict, first: int) -> list[str]:
 def quads_at(field, rows: np.ndarray) -> str:
     """The quad mesh measures of ``field`` with its frames set to ``rows`` (serial)."""
     field.q.x.array[:] = rows.ravel()
-    quality = field.quadrangulate()
+    quality = quadrangulate(field).quality
     return (f"{quality['quads']} quads, {quality['irregular_vertices']} irregular vertices, "
             f"scaled Jacobian min {quality['min_sj']:.3f}, edge ratio max "
             f"{quality['edge_length_ratio']['max']:.2f}, misfit {quality['misfit_quantised']:.4f}")
@@ -243,5 +243,6 @@ if __name__ == "__main__":
     from ufl_frames.frames2d import odeco
     from ufl_frames.mesh.hierarchy import nested_domains
     from ufl_frames.pipeline import FrameField
+    from ufl_frames.pipeline.stages import quadrangulate
 
     main()

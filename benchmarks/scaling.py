@@ -81,6 +81,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     from ufl_frames import geometry
     from ufl_frames.mesh.hierarchy import nested_domains
     from ufl_frames.pipeline import FrameField
+    from ufl_frames.pipeline.files import write_field
+    from ufl_frames.pipeline.stages import quadrangulate
 
     comm = MPI.COMM_WORLD
     shape, kind = case.split("-")
@@ -114,10 +116,10 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
-    stage("write", lambda: field.write(out, label=shape))
+    stage("write", lambda: write_field(out, field, label=shape))
     quad_record = None
     if quads:  # the default quad size: the triangles' mean edge
-        found = stage("quads", field.quadrangulate)
+        found = stage("quads", lambda: quadrangulate(field).quality)
         quad_record = {key: found[key] for key in ("quads", "irregular_vertices", "min_sj",
                                                    "mean_sj", "valid", "seconds")}
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)

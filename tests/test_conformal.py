@@ -21,6 +21,7 @@ from ufl_frames.fem import energy
 from ufl_frames.fem.conformal import conformal_field
 from ufl_frames.frames2d import odeco
 from ufl_frames.pipeline import FrameField
+from ufl_frames.pipeline.stages import parametrise
 
 COMM = MPI.COMM_WORLD
 
@@ -77,17 +78,18 @@ def test_piano_conformal_field_integrates_and_is_the_same_on_any_ranks():
     misfits, mbo_misfits = [], []
     for h in (0.05, 0.025):
         field = FrameField.initial(geometry.piano(COMM, h), isotropic=True)
-        mbo_misfits.append(field.parametrise()["misfit"])
-        found = field.conformal().parametrise()
-        assert found["flipped_triangles"] == 0 and field.conformal_scale
+        mbo_misfits.append(parametrise(field).quality["misfit"])
+        conformal = field.conformal()
+        found = parametrise(conformal).quality
+        assert found["flipped_triangles"] == 0 and conformal.conformal_scale
         misfits.append(found["misfit"])
     assert misfits[1] < 0.7 * misfits[0], misfits  # measured 0.038 -> 0.023
     assert mbo_misfits[1] > 0.9 * mbo_misfits[0], mbo_misfits  # 0.085 -> 0.081
     assert misfits[0] < 0.5 * mbo_misfits[0]
     alone = FrameField.initial(geometry.piano(MPI.COMM_SELF, 0.05), isotropic=True)
-    assert alone.conformal().parametrise()["misfit"] == pytest.approx(
+    assert parametrise(alone.conformal()).quality["misfit"] == pytest.approx(parametrise(
         FrameField.initial(geometry.piano(COMM, 0.05), isotropic=True).conformal()
-        .parametrise()["misfit"], rel=1e-6)
+    ).quality["misfit"], rel=1e-6)
 
 
 def test_cli_conformal_runs_no_tao(tmp_path):

@@ -848,8 +848,8 @@ def describe_singularities(singularities: list[dict], limit: int = DESCRIBE_LIMI
 OUTPUT_NAMES = (
     r"summary\.json", r"frames\.bp", r"frames\.pvd", r"frames\d+\.pvtu", r"frames_p\d+_\d+\.vtu",
     r"frames\.xdmf", r"frames\.h5", r"frames\.png", r"convergence\.png",
-    r"param\.png", r"param\.vtu",  # FrameField.write_param
-    r"quads\.msh", r"quads\.vtu", r"quads\.png",  # FrameField.write_quads
+    r"param\.png", r"param\.vtu",  # pipeline.files.write_param
+    r"quads\.msh", r"quads\.vtu", r"quads\.png",  # pipeline.files.write_quads
     r"checkpoint",  # ufl_frames.checkpoint: an unfinished run's, removed when it completes
 )
 _OUTPUT_NAME = re.compile("|".join(f"(?:{name})" for name in OUTPUT_NAMES))

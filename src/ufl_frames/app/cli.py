@@ -126,6 +126,7 @@ def _positive_int(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of the ``ufl-frames`` command line (its errors raise :class:`UsageError`)."""
     parser = _Parser(
         prog=PROG,
         description="Integrable 2D frame fields (Odeco tensors, DOLFINx, PETSc/TAO).",
@@ -144,6 +145,15 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Any option with a single dash is passed to PETSc, e.g. -tao_type lmvm "
         "-tao_monitor -tao_max_it 50 -mbo_ksp_type cg; put them after GEOMETRY.",
     )
+    _add_solve_arguments(solve)
+    commands.add_parser("info", help="print the versions of the libraries in use",
+                        description="Print the versions of ufl_frames, DOLFINx, PETSc, "
+                        "MPI, Gmsh and friends.")
+    return parser
+
+
+def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
+    """The arguments of ``solve``: those of :class:`~ufl_frames.app.run.RunConfig`."""
     solve.add_argument("geometry", metavar="GEOMETRY",
                        help="'annulus', 'piano' or a .geo/.msh/.step/.stp/.brep file")
     solve.add_argument("--isotropic", action="store_true",
@@ -212,11 +222,6 @@ def build_parser() -> argparse.ArgumentParser:
                        "8-30%% higher H than meshes of the same size made by Gmsh (default: "
                        "every level meshed by Gmsh)")
     solve.add_argument("-q", "--quiet", action="store_true", help="no progress output")
-
-    commands.add_parser("info", help="print the versions of the libraries in use",
-                        description="Print the versions of ufl_frames, DOLFINx, PETSc, "
-                        "MPI, Gmsh and friends.")
-    return parser
 
 
 def _aspect(text: str) -> float:

@@ -363,6 +363,7 @@ class _Solve:
         self.state = None  # the checkpoint resumed from
         self.tao_type = None
         self.max_it = config.max_it  # -tao_max_it wins
+        self.param = self.quads = None  # the stages' records
         self._finest_space = None
         self._levels = 1
 
@@ -459,7 +460,7 @@ class _Solve:
         interrupts.set_stage("the conformal scale")
         self.say("conformal scale (isotropic frames of the MBO directions) ...")
         with failures("the conformal-scale solve"):
-            self.field.conformal()
+            self.field = self.field.conformal()
 
     def _nested(self, domains: list) -> None:
         from ufl_frames.pipeline import FrameField
@@ -517,11 +518,17 @@ class _Solve:
                  "boundary is too coarse for the field somewhere; try a smaller --mesh-size")
 
     def stages(self) -> None:
-        """With ``param``, the seamless map; with ``quads``, the quad mesh."""
+        """With ``param``, the seamless map; with ``quads``, the quad mesh: both from one
+        gather of the field and one cut mesh on rank 0."""
+        from ufl_frames.pipeline import stages
+
         config, say = self.config, self.say
+        root = None
         if config.param:
             with failures("the parametrisation"):
-                quality = self.field.parametrise(quad_size=config.quad_size)
+                root = stages.RootField(self.field)
+                self.param = stages.parametrise(root, quad_size=config.quad_size)
+            quality = self.param.quality
             say(f"parametrisation: misfit {quality['misfit']:.4f}, "
                 f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
                 f"of length {quality['cut_length']:.3g}")
@@ -531,9 +538,11 @@ class _Solve:
             say("quad mesh ...")
             with failures("the quad mesh"):
                 try:
-                    found = self.field.quadrangulate(quad_size=config.quad_size)
+                    root = stages.RootField(self.field) if root is None else root
+                    self.quads = stages.quadrangulate(root, quad_size=config.quad_size)
                 except ValueError as e:  # no valid integer-grid map: the same on every rank
                     raise RunError(str(e)) from e
+            found = self.quads.quality
             say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
                 f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
@@ -545,43 +554,18 @@ class _Solve:
     def write(self, start: float, petsc_options: dict) -> dict:
         """The files and ``summary.json`` into the output folder, whole or not at all; the
         summary."""
-        from mpi4py import MPI
-
         from ufl_frames import checkpoint as checkpoints
         from ufl_frames import io
 
-        config, comm, field, out = self.config, self.comm, self.field, self.out
+        config, comm, out = self.config, self.comm, self.out
         ours = (checkpoints.FOLDER,) if self.store.written else ()
         folder = io.OutputFolder(out, force=config.force, comm=comm, ours=ours)
         try:
             with failures(f"writing the results to {str(out)!r}", writing=True):
                 staging = folder.open()
                 interrupts.attach_output(folder)
-                files = field.write(staging, label=config.label, tao_type=self.tao_type)
-                if config.param:
-                    files += field.write_param(staging, label=config.label)
-                if config.quads:
-                    files += field.write_quads(staging, label=config.label)
-                files.append("summary.json")
-                record = field.summary()
-                summary = {
-                    "ufl_frames_version": __version__,
-                    "geometry": config.geometry,
-                    **{key: record.pop(key) for key in ("isotropic", "max_aspect",
-                                                        "pinned_singularities", "mesh_size",
-                                                        "requested_mesh_size")},
-                    "size_factor": float(config.size_factor),
-                    "loader_notes": list(field.domain.notes),
-                    "max_it": int(self.max_it),
-                    "num_processes": comm.size,
-                    "tao_type": self.tao_type,
-                    "petsc_options": petsc_options,
-                    "resumed_from_iteration": None if self.state is None
-                    else self.state.iterations,
-                    **record,
-                    "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
-                    "files": files,
-                }
+                files = self.write_files(staging)
+                summary = self.summary(start, petsc_options, files)
                 io.write_summary(staging / "summary.json", summary, comm=comm)
                 interrupts.checkpoint(comm)
                 interrupts.set_stage("commit")
@@ -594,3 +578,40 @@ class _Solve:
         interrupts.set_stage("done")
         self.say(f"wrote {out}/: {', '.join(files)}")
         return summary
+
+    def write_files(self, staging: Path) -> list[str]:
+        """The field's and the stages' files into ``staging``; their names, and
+        ``summary.json`` (written last, by :meth:`write`)."""
+        from ufl_frames.pipeline import files
+
+        label, comm = self.config.label, self.comm
+        names = files.write_field(staging, self.field, label=label, tao_type=self.tao_type)
+        if self.param is not None:
+            names += files.write_param(staging, self.param, label, comm)
+        if self.quads is not None:
+            names += files.write_quads(staging, self.quads, label, comm)
+        return [*names, "summary.json"]
+
+    def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:
+        """The record for ``summary.json`` (collective): the field's kind, the run's
+        settings, the findings, the time and the files."""
+        from mpi4py import MPI
+
+        from ufl_frames.pipeline.report import findings_record, frames_record
+
+        config, comm = self.config, self.comm
+        return {
+            "ufl_frames_version": __version__,
+            "geometry": config.geometry,
+            **frames_record(self.field),
+            "size_factor": float(config.size_factor),
+            "loader_notes": list(self.field.domain.notes),
+            "max_it": int(self.max_it),
+            "num_processes": comm.size,
+            "tao_type": self.tao_type,
+            "petsc_options": petsc_options,
+            "resumed_from_iteration": None if self.state is None else self.state.iterations,
+            **findings_record(self.field, self.param, self.quads),
+            "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+            "files": files,
+        }
