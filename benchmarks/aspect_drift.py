@@ -7,8 +7,8 @@
 The non-isotropic piano is the one case whose finest level often takes 30-55 Newton steps
 (the annulus and the isotropic cases 4-11 at every size). This script asks what those
 steps do. For each mesh size of ``--sizes`` (the finest level; the coarser ones as the CLI
-makes them: Gmsh meshes of 2^k times the size, :func:`ufl_frames.cli.auto_levels` of them)
-and each bound l_max/l_min ≤ A of ``--aspects``, it runs the CLI's nested iteration
+makes them, :func:`ufl_frames.mesh.hierarchy.nested_domains`: Gmsh meshes of 2^k times the
+size) and each bound l_max/l_min ≤ A of ``--aspects``, it runs the CLI's nested iteration
 (:meth:`FrameField.nested`, default solver) and, through its checkpoint hook, records per
 Newton step of the finest level H, the Dirichlet energy E and the share of vertices
 whose frames are on the bound (aspect within 1e-6 of A).
@@ -113,7 +113,7 @@ def probe(field, trace: dict, first: int) -> list[str]:
 def quads_at(field, rows: np.ndarray) -> str:
     """The quad mesh measures of ``field`` with its frames set to ``rows`` (serial)."""
     field.q.x.array[:] = rows.ravel()
-    quality = field.quadrangulate()
+    quality = quadrangulate(field).quality
     return (f"{quality['quads']} quads, {quality['irregular_vertices']} irregular vertices, "
             f"scaled Jacobian min {quality['min_sj']:.3f}, edge ratio max "
             f"{quality['edge_length_ratio']['max']:.2f}, misfit {quality['misfit_quantised']:.4f}")
@@ -125,9 +125,7 @@ def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False,
     the bound ``max_aspect``; its checkpoint hook traces the finest level step by step."""
     comm = MPI.COMM_WORLD
     fine_domain = build(comm, "piano", h)
-    count = auto_levels(fine_domain.num_cells)
-    domains = [build(comm, "piano", h, 2.0**k) for k in range(count - 1, 0, -1)]
-    domains.append(fine_domain)
+    domains = nested_domains(comm, "piano", fine_domain, "auto", h)
     trace = {"H": [], "E": [], "bound": [], "near": [], "rows": []}
 
     def keep(state, finest):
@@ -240,10 +238,11 @@ if __name__ == "__main__":
     import dolfinx.fem.petsc
     from mpi4py import MPI
 
-    from ufl_frames.cli import auto_levels
     from ufl_frames.fem.manifold import FrameManifold
     from ufl_frames.frames2d import odeco
     from ufl_frames.mesh import build
+    from ufl_frames.mesh.hierarchy import nested_domains
     from ufl_frames.pipeline import FrameField
+    from ufl_frames.pipeline.stages import quadrangulate
 
     main()

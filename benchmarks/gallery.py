@@ -220,7 +220,7 @@ def _tool(name: str) -> str | None:
 
 def _command(np_: int) -> list[str]:
     frames = _tool("ufl-frames")
-    cmd = [frames] if frames else [sys.executable, "-m", "ufl_frames.cli"]
+    cmd = [frames] if frames else [sys.executable, "-m", "ufl_frames.app"]
     if np_ > 1:
         mpirun = _tool("mpirun")
         if mpirun is None:

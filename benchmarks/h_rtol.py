@@ -40,8 +40,8 @@ init_petsc([sys.argv[0]])
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from ufl_frames.cli import auto_levels  # noqa: E402
 from ufl_frames.mesh import build  # noqa: E402
+from ufl_frames.mesh.hierarchy import nested_domains  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
 from ufl_frames.solvers import tao  # noqa: E402
 
@@ -61,9 +61,7 @@ def solve_histories(case: str) -> list[list[dict]]:
         if kind.startswith("nested-"):
             shape = kind[len("nested-"):]
             fine = build(comm, shape, h)
-            count = auto_levels(fine.num_cells)
-            domains = [build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)]
-            field = FrameField.nested(domains + [fine], max_it=500)
+            field = FrameField.nested(nested_domains(comm, shape, fine, "auto", h), max_it=500)
             return field.level_histories
         field = FrameField.initial(build(comm, kind, h))
         return [field.solve(max_it=500).history]

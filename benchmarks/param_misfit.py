@@ -6,9 +6,9 @@
 For each case (``piano`` or ``annulus``, isotropic or not) and mesh size: the MBO field, the
 field of the default solver (TAO ``nls``), unless ``--no-gd`` the note's projected
 gradient descent (``bncg``, ``--gd-iterations``), and for isotropic cases the conformal
-field of the MBO directions (:meth:`~ufl_frames.pipeline.FrameField.conformal`), each
+field of the MBO directions (:meth:`~ufl_frames.pipeline.field.FrameField.conformal`), each
 parametrised by
-:meth:`ufl_frames.pipeline.FrameField.parametrise` (default quad size). Printed per row:
+:func:`ufl_frames.pipeline.stages.parametrise` (default quad size). Printed per row:
 triangles, H, the relative L² misfit of the seamless map, flipped triangles, cuts; then
 the misfit's rate per halving of h for each field. An integrable field's misfit is the P1
 error, O(h); a field that does not integrate keeps a misfit that does not fall.
@@ -26,6 +26,7 @@ from mpi4py import MPI  # noqa: E402
 
 from ufl_frames.mesh import build  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
+from ufl_frames.pipeline.stages import parametrise  # noqa: E402
 
 CASES = ("piano-noniso", "piano-iso", "annulus-noniso", "annulus-iso")
 
@@ -43,7 +44,7 @@ def measure(case: str, h: float, gd_iterations: int | None) -> list[dict]:
         field = FrameField.initial(build(comm, shape, h), isotropic=kind == "iso")
         H, reason = float("nan"), "-"
         if tao_type == "conformal":  # one Poisson solve for the lengths, no TAO
-            field.conformal()
+            field = field.conformal()
             from ufl_frames.fem import energy
 
             H, reason = energy.integrability_energy(field.q), "(conformal scale)"
@@ -56,7 +57,7 @@ def measure(case: str, h: float, gd_iterations: int | None) -> list[dict]:
             finally:
                 PETSc.Options().delValue("pm_tao_type")
             H, reason = result.H_final, result.converged_reason
-        quality = field.parametrise()
+        quality = parametrise(field).quality
         rows.append({"case": case, "h": h, "field": name, "triangles": field.domain.num_cells,
                      "H": H, "reason": reason, **quality})
     return rows

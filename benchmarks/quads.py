@@ -307,7 +307,7 @@ def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
     from ufl_frames.quads.measures import check_quad_mesh, quad_quality
 
     frames = _tool("ufl-frames")
-    base = [frames] if frames else [sys.executable, "-m", "ufl_frames.cli"]
+    base = [frames] if frames else [sys.executable, "-m", "ufl_frames.app"]
     row = {"method": method, "quad_size": quad_size}
     with tempfile.TemporaryDirectory(prefix="quads_") as tmp:
         folder = Path(tmp) / "run"

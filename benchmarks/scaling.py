@@ -63,12 +63,13 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
             quads: bool = False, levels: int | str = "auto", nested_meshes: bool = False) -> dict:
     """The whole pipeline on ``case`` at mesh size ``h``; returns the record (rank 0).
 
-    With ``levels`` > 1 (or 'auto', the CLI's default rule :func:`ufl_frames.cli.auto_levels`,
-    when that gives more than one), nested iteration (:meth:`FrameField.nested`): ``mesh``
-    meshes every level, ``mbo`` is 0 (MBO runs on the coarsest mesh, inside ``solve``),
-    and the Newton and Krylov counts are the finest level's (every level's in ``levels``);
-    with ``nested_meshes`` the levels are :func:`ufl_frames.mesh.build_nested`'s (the
-    coarsest split, as ``ufl-frames solve --nested-meshes``) instead of meshed by Gmsh."""
+    With ``levels`` > 1 (or 'auto', the CLI's default rule, when that gives more than one),
+    nested iteration (:meth:`FrameField.nested`) over the meshes of
+    :func:`ufl_frames.mesh.hierarchy.nested_domains`: ``mesh`` meshes every level, ``mbo``
+    is 0 (MBO runs on the coarsest mesh, inside ``solve``), and the Newton and Krylov
+    counts are the finest level's (every level's in ``levels``); with ``nested_meshes``
+    the levels are :func:`ufl_frames.mesh.build_nested`'s (the coarsest split, as
+    ``ufl-frames solve --nested-meshes``) instead of meshed by Gmsh."""
     from ufl_frames.bootstrap import init_petsc
 
     init_petsc([sys.argv[0], *petsc_argv])
@@ -76,9 +77,11 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 
     from mpi4py import MPI
 
-    from ufl_frames.cli import auto_levels
-    from ufl_frames.mesh import build, build_nested
+    from ufl_frames.mesh import build
+    from ufl_frames.mesh.hierarchy import nested_domains
     from ufl_frames.pipeline import FrameField
+    from ufl_frames.pipeline.files import write_field
+    from ufl_frames.pipeline.stages import quadrangulate
 
     comm = MPI.COMM_WORLD
     shape, kind = case.split("-")
@@ -96,10 +99,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 
     def meshes():
         fine = build(comm, shape, h)
-        count = auto_levels(fine.num_cells) if levels == "auto" else int(levels)
-        if nested_meshes and count > 1:
-            return build_nested(comm, shape, count, h)
-        return [build(comm, shape, h, 2.0**k) for k in range(count - 1, 0, -1)] + [fine]
+        count = levels if levels == "auto" else int(levels)
+        return nested_domains(comm, shape, fine, count, h, nested_meshes=nested_meshes)
 
     domains = stage("mesh", meshes)
     domain = domains[-1]
@@ -114,10 +115,10 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.Barrier()
-    stage("write", lambda: field.write(out, label=shape))
+    stage("write", lambda: write_field(out, field, label=shape))
     quad_record = None
     if quads:  # the default quad size: the triangles' mean edge
-        found = stage("quads", field.quadrangulate)
+        found = stage("quads", lambda: quadrangulate(field).quality)
         quad_record = {key: found[key] for key in ("quads", "irregular_vertices", "min_sj",
                                                    "mean_sj", "valid", "seconds")}
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)

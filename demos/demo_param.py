@@ -53,6 +53,8 @@ from mpi4py import MPI  # noqa: E402
 import ufl_frames.mesh  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
+from ufl_frames.pipeline.files import write_param  # noqa: E402
+from ufl_frames.pipeline.stages import parametrise  # noqa: E402
 
 comm = MPI.COMM_WORLD
 CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false")
@@ -90,10 +92,11 @@ V = energy.frame_space(annulus.mesh)
 exact = energy.interpolate_frames(
     V, lambda x: (np.hypot(x[0], x[1]), np.hypot(x[0], x[1]), np.arctan2(x[1], x[0])))
 ring = FrameField(domain=annulus, q=exact, isotropic=True)
-report("annulus, exact field", ring.parametrise(quad_size=0.1))
-ring.write_param(out, "annulus, exact field", stem="param_annulus")
+param = parametrise(ring, quad_size=0.1)
+report("annulus, exact field", param.quality)
+write_param(out, param, "annulus, exact field", comm, stem="param_annulus")
 if comm.rank == 0:
-    uv, s = ring.parametrisation.uv, ring.parametrisation.scale
+    uv, s = param.parametrisation.uv, param.parametrisation.scale
     say(f"  U spans {np.ptp(uv[:, 0]):.4f}, V spans {np.ptp(uv[:, 1]):.4f}; with the scale "
         f"s = {s:.4g}: s ln 2 = {s * np.log(2):.4f}, 2π s = {2 * np.pi * s:.4f} "
         "(the two spans, in some order)")
@@ -108,13 +111,16 @@ if comm.rank == 0:
 # +
 piano = ufl_frames.mesh.piano(comm, h)
 field = FrameField.initial(piano, isotropic=False)
-report("piano, MBO field", field.parametrise())
-field.write_param(out, "piano, MBO field", stem="param_piano_mbo")
+param = parametrise(field)
+report("piano, MBO field", param.quality)
+write_param(out, param, "piano, MBO field", comm, stem="param_piano_mbo")
 result = field.solve(max_it=20 if CI else 500)
 say(f"solve: {result.converged_reason} after {result.iterations} iterations, "
     f"H {result.H_initial:.4e} -> {result.H_final:.4e}")
-report("piano, optimised field", field.parametrise())
-field.write_param(out, "piano, optimised non-isotropic field", stem="param_piano_optimised")
+param = parametrise(field)
+report("piano, optimised field", param.quality)
+write_param(out, param, "piano, optimised non-isotropic field", comm,
+            stem="param_piano_optimised")
 # -
 
 # The figures `param_*.png` show the integer iso-lines of U (blue) and V (red) and the

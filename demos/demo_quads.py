@@ -13,7 +13,7 @@
 # The integer iso-lines of a parametrisation $(U, V)$ outline quads, but only if the map is
 # an *integer-grid map*: the grid $\mathbb{Z}^2$ must look the same from both sides of every
 # cut and fit the boundary. This demo takes the piano's optimised fields, isotropic and
-# non-isotropic, to quad meshes in two steps (`FrameField.quadrangulate`):
+# non-isotropic, to quad meshes in two steps (`ufl_frames.pipeline.stages.quadrangulate`):
 #
 # 1. **Quantisation** (`ufl_frames.param.quantise`). Three kinds of quantities of the
 #    seamless map become integers: the translation of every seam, the constant coordinate
@@ -46,6 +46,8 @@ from mpi4py import MPI  # noqa: E402
 
 from ufl_frames.mesh import piano  # noqa: E402
 from ufl_frames.pipeline import FrameField  # noqa: E402
+from ufl_frames.pipeline.files import write_quads  # noqa: E402
+from ufl_frames.pipeline.stages import quadrangulate  # noqa: E402
 
 comm = MPI.COMM_WORLD
 CI = os.environ.get("CI", "").strip().lower() not in ("", "0", "false")
@@ -112,8 +114,9 @@ fields["conformal"] = FrameField.initial(piano(comm, h), isotropic=True).conform
 
 # +
 for kind, field in fields.items():
-    report(f"piano, {kind}", field.quadrangulate(quad_size))
-    field.write_quads(out, f"piano, {kind} field", stem=f"quads_piano_{kind}")
+    quads = quadrangulate(field, quad_size)
+    report(f"piano, {kind}", quads.quality)
+    write_quads(out, quads, f"piano, {kind} field", comm, stem=f"quads_piano_{kind}")
 # -
 
 # `quads_piano_non-isotropic.png`, `quads_piano_isotropic.png` and
@@ -137,8 +140,9 @@ for kind, field in fields.items():
 # +
 mbo = FrameField.initial(piano(comm, h), isotropic=False)
 try:
-    report("piano, MBO field", mbo.quadrangulate(quad_size))
-    mbo.write_quads(out, "piano, MBO field", stem="quads_piano_mbo")
+    quads = quadrangulate(mbo, quad_size)
+    report("piano, MBO field", quads.quality)
+    write_quads(out, quads, "piano, MBO field", comm, stem="quads_piano_mbo")
 except ValueError as e:  # no valid integer-grid map: said in one line
     say(f"piano, MBO field: {e}")
 # -

@@ -23,7 +23,10 @@ init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames import checkpoint, cli, interrupts, output, petsc_options  # noqa: E402
+from ufl_frames import checkpoint, interrupts, output, petsc_options  # noqa: E402
+from ufl_frames.app import cli  # noqa: E402
+from ufl_frames.app.failures import InputError  # noqa: E402
+from ufl_frames.app.run import RunConfig, run  # noqa: E402
 from ufl_frames.fem import energy  # noqa: E402
 from ufl_frames.output import figures  # noqa: E402
 
@@ -52,12 +55,12 @@ def _env(**extra):
 
 
 def _command(mpi: bool = False) -> list[str]:
-    command = [sys.executable, "-m", "ufl_frames.cli"]
+    command = [sys.executable, "-m", "ufl_frames.app"]
     return [str(MPIRUN), "-n", "2", *command] if mpi else command
 
 
 def run_cli(*args, cwd, mpi=False, timeout=120, env=None):
-    """``python -m ufl_frames.cli ARGS`` in ``cwd`` (under ``mpirun -n 2`` if ``mpi``)."""
+    """``python -m ufl_frames.app ARGS`` in ``cwd`` (under ``mpirun -n 2`` if ``mpi``)."""
     return subprocess.run([*_command(mpi), *map(str, args)], cwd=cwd, capture_output=True,
                           text=True, timeout=timeout, env=env or _env(), check=False)
 
@@ -171,8 +174,8 @@ def test_run_solve_checks_the_options_database(shared_tmp):
     from ufl_frames.bootstrap import options_scope
 
     with options_scope([("tao_type", "pounders")]):
-        with pytest.raises(cli.InputError, match="pounders"):
-            cli.run_solve("annulus", mesh_size=0.2, out=shared_tmp / "o", quiet=True, comm=COMM)
+        with pytest.raises(InputError, match="pounders"):
+            run(RunConfig("annulus", mesh_size=0.2, out=shared_tmp / "o", quiet=True), comm=COMM)
     assert list(shared_tmp.iterdir()) == []
 
 

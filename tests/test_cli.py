@@ -19,7 +19,10 @@ init_petsc([])  # not pytest's command line
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from ufl_frames import __version__, cli, solvers  # noqa: E402
+from ufl_frames import __version__, solvers  # noqa: E402
+from ufl_frames.app import cli  # noqa: E402
+from ufl_frames.app.failures import UsageError  # noqa: E402
+from ufl_frames.app.run import RunConfig, default_output_folder, run  # noqa: E402
 
 COMM = MPI.COMM_WORLD
 MPIRUN = Path(sys.prefix) / "bin" / "mpirun"
@@ -34,10 +37,10 @@ OUTPUT_FILES = {"summary.json", "frames.bp", "frames.png", "convergence.png"}
 
 
 def run_cli(*args, cwd, timeout=300):
-    """``python -m ufl_frames.cli ARGS`` in ``cwd``; the CompletedProcess."""
+    """``python -m ufl_frames.app ARGS`` in ``cwd``; the CompletedProcess."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     return subprocess.run(
-        [sys.executable, "-m", "ufl_frames.cli", *map(str, args)],
+        [sys.executable, "-m", "ufl_frames.app", *map(str, args)],
         cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env, check=False,
     )
 
@@ -64,11 +67,11 @@ def shared_tmp(tmp_path):
 
 @pytest.fixture(scope="module")
 def annulus_run(tmp_path_factory):
-    """One coarse annulus run through run_solve (collective), shared by several tests."""
+    """One coarse annulus run through app.run.run (collective), shared by several tests."""
     root = Path(COMM.bcast(str(tmp_path_factory.mktemp("annulus")), root=0))
     out = root / "out"
     options_before = PETSc.Options().getAll()
-    summary = cli.run_solve("annulus", mesh_size=0.2, max_it=20, out=out, quiet=True, comm=COMM)
+    summary = run(RunConfig("annulus", mesh_size=0.2, max_it=20, out=out, quiet=True), comm=COMM)
     return summary, out, options_before
 
 
@@ -118,8 +121,8 @@ def test_run_leaves_petsc_options_as_found(annulus_run):
 
 
 def test_piano_lists_singularities(shared_tmp):
-    summary = cli.run_solve("piano", mesh_size=0.2, max_it=5, out=shared_tmp / "piano",
-                            quiet=True, comm=COMM)
+    summary = run(RunConfig("piano", mesh_size=0.2, max_it=5, out=shared_tmp / "piano",
+                            quiet=True), comm=COMM)
     assert isinstance(summary["singularities"], list)
     for s in summary["singularities"]:
         assert set(s) == {"index", "x", "y"}
@@ -128,8 +131,8 @@ def test_piano_lists_singularities(shared_tmp):
 def test_param_adds_the_map(shared_tmp):
     """--param: param.png, param.vtu and the map's measures in the summary (the annulus
     field is cut once, from the inner to the outer circle, and nothing flips)."""
-    summary = cli.run_solve("annulus", mesh_size=0.2, max_it=20, out=shared_tmp / "p",
-                            quiet=True, comm=COMM, param=True, quad_size=0.2)
+    summary = run(RunConfig("annulus", mesh_size=0.2, max_it=20, out=shared_tmp / "p", quiet=True,
+                            param=True, quad_size=0.2), comm=COMM)
     assert {"param.png", "param.vtu"} <= set(summary["files"])
     assert {p.name for p in (shared_tmp / "p").iterdir()} >= {"param.png", "param.vtu"}
     found = summary["param"]
@@ -138,7 +141,7 @@ def test_param_adds_the_map(shared_tmp):
 
 
 def test_progress_lines(shared_tmp, capsys):
-    cli.run_solve("annulus", mesh_size=0.2, max_it=3, out=shared_tmp / "o", comm=COMM)
+    run(RunConfig("annulus", mesh_size=0.2, max_it=3, out=shared_tmp / "o"), comm=COMM)
     lines = capsys.readouterr().out.splitlines()
     if COMM.rank == 0:
         text = "\n".join(lines)
@@ -152,8 +155,7 @@ def test_progress_lines(shared_tmp, capsys):
 
 
 def test_quiet_run_prints_nothing(shared_tmp, capsys):
-    cli.run_solve("annulus", mesh_size=0.2, max_it=2, out=shared_tmp / "o", quiet=True,
-                  comm=COMM)
+    run(RunConfig("annulus", mesh_size=0.2, max_it=2, out=shared_tmp / "o", quiet=True), comm=COMM)
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == ""
 
@@ -251,13 +253,13 @@ def test_split_petsc_options():
     assert cli.split_petsc_options(["-tao_type", "lmvm", "-tao_monitor", "-tao_gatol", "-1e-3"]) \
         == [("tao_type", "lmvm"), ("tao_monitor", None), ("tao_gatol", "-1e-3")]
     for bad in (["--nope"], ["stray"], ["-a", "b", "c"]):
-        with pytest.raises(cli.UsageError):
+        with pytest.raises(UsageError):
             cli.split_petsc_options(bad)
 
 
 def test_default_output_folder():
-    assert cli.default_output_folder("piano") == Path("out_piano")
-    assert cli.default_output_folder("meshes/part.step") == Path("out_part")
+    assert default_output_folder("piano") == Path("out_piano")
+    assert default_output_folder("meshes/part.step") == Path("out_part")
 
 
 # --- subprocesses (serial) -----------------------------------------------------------------
@@ -346,7 +348,7 @@ needs_mpirun = pytest.mark.skipif(not MPIRUN.exists(), reason=f"no {MPIRUN}")
 @pytest.mark.serial
 @needs_mpirun
 def test_cli_under_mpirun(tmp_path):
-    command = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "ufl_frames.cli"]
+    command = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "ufl_frames.app"]
     proc = subprocess.run(
         [str(MPIRUN), "-n", "2", *command, "solve", "annulus", *COARSE, "--max-it", "10",
          "--out", "par"],
@@ -364,7 +366,7 @@ def test_cli_under_mpirun(tmp_path):
 @pytest.mark.serial
 @needs_mpirun
 def test_cli_error_under_mpirun_is_reported_once(tmp_path):
-    command = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "ufl_frames.cli"]
+    command = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "ufl_frames.app"]
     proc = subprocess.run(
         [str(MPIRUN), "-n", "2", *command, "solve", "nosuch.msh", *COARSE],
         cwd=tmp_path, capture_output=True, text=True, timeout=120, check=False,
@@ -399,8 +401,8 @@ def test_run_solve_on_a_real_geo_file(shared_tmp):
     if COMM.rank == 0:
         path.write_text(REAL_GEO)
     COMM.Barrier()
-    summary = cli.run_solve(str(path), mesh_size=0.15, max_it=10, out=shared_tmp / "out",
-                            quiet=True, comm=COMM)
+    summary = run(RunConfig(str(path), mesh_size=0.15, max_it=10, out=shared_tmp / "out",
+                            quiet=True), comm=COMM)
     notes = " ".join(summary["loader_notes"])
     assert "no triangle uses" in notes and "quadrilaterals split" in notes
     check = summary["poincare_hopf"]

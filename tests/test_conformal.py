@@ -15,13 +15,14 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import cli
+from ufl_frames.app.run import RunConfig, run
 from ufl_frames.fem import energy
 from ufl_frames.fem.conformal import conformal_field
 from ufl_frames.fem.constraints import lumped_mass
 from ufl_frames.frames2d import odeco
 from ufl_frames.mesh import annulus, load, piano
 from ufl_frames.pipeline import FrameField
+from ufl_frames.pipeline.stages import parametrise
 
 COMM = MPI.COMM_WORLD
 
@@ -78,23 +79,24 @@ def test_piano_conformal_field_integrates_and_is_the_same_on_any_ranks():
     misfits, mbo_misfits = [], []
     for h in (0.05, 0.025):
         field = FrameField.initial(piano(COMM, h), isotropic=True)
-        mbo_misfits.append(field.parametrise()["misfit"])
-        found = field.conformal().parametrise()
-        assert found["flipped_triangles"] == 0 and field.conformal_scale
+        mbo_misfits.append(parametrise(field).quality["misfit"])
+        conformal = field.conformal()
+        found = parametrise(conformal).quality
+        assert found["flipped_triangles"] == 0 and conformal.conformal_scale
         misfits.append(found["misfit"])
     assert misfits[1] < 0.7 * misfits[0], misfits  # measured 0.038 -> 0.023
     assert mbo_misfits[1] > 0.9 * mbo_misfits[0], mbo_misfits  # 0.085 -> 0.081
     assert misfits[0] < 0.5 * mbo_misfits[0]
     alone = FrameField.initial(piano(MPI.COMM_SELF, 0.05), isotropic=True)
-    assert alone.conformal().parametrise()["misfit"] == pytest.approx(
+    assert parametrise(alone.conformal()).quality["misfit"] == pytest.approx(parametrise(
         FrameField.initial(piano(COMM, 0.05), isotropic=True).conformal()
-        .parametrise()["misfit"], rel=1e-6)
+    ).quality["misfit"], rel=1e-6)
 
 
 def test_cli_conformal_runs_no_tao(tmp_path):
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "c"
-    summary = cli.run_solve("piano", mesh_size=0.1, out=out, quiet=True, comm=COMM,
-                            conformal=True, param=True)
+    summary = run(RunConfig("piano", mesh_size=0.1, out=out, quiet=True, conformal=True,
+                            param=True), comm=COMM)
     assert summary["isotropic"] and summary["conformal_scale"]
     assert summary["tao_type"] is None and "iterations" not in summary
     assert "convergence.png" not in summary["files"]

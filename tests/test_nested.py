@@ -13,13 +13,17 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import ufl_frames.mesh
-from ufl_frames import cli, solvers
+from ufl_frames import solvers
+from ufl_frames.app import cli
+from ufl_frames.app.failures import InputError
+from ufl_frames.app.run import RunConfig, run
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.fem import energy
 from ufl_frames.fem.transfer import interpolate_field
 from ufl_frames.frames2d import odeco
-from ufl_frames.mesh import GeometryError, build
+from ufl_frames.mesh import GeometryError, build, hierarchy
 from ufl_frames.pipeline import FrameField
+from ufl_frames.pipeline.report import field_summary
 from ufl_frames.solvers import tao
 
 COMM = MPI.COMM_WORLD
@@ -197,7 +201,7 @@ def test_nested_pins_a_disk_of_the_coarsest_mesh_size():
     coarse, fine = field.levels
     assert coarse["singularities"] == fine["singularities"] == [-0.25, 0.25]
     assert fine["reason"].startswith("CONVERGED")
-    assert field.pin_radius == radius and field.summary()["pin_radius"] == radius
+    assert field.pin_radius == radius and field_summary(field)["pin_radius"] == radius
     start = FrameField.initial(domains[0]).singularities
     for s, t in zip(start, field.singularities, strict=True):
         assert np.hypot(s["x"] - t["x"], s["y"] - t["y"]) < radius
@@ -240,15 +244,15 @@ def test_pin_radius_refuses_bad_values(argv, status, words, tmp_path, capsys):
     ({"levels": 2, "conformal": True}, "--conformal"),
 ])
 def test_run_solve_refuses_bad_levels(arguments, words, tmp_path):
-    with pytest.raises(cli.InputError, match=words):
-        cli.run_solve("piano", mesh_size=0.2, out=tmp_path / "out", quiet=True, comm=COMM,
-                      **arguments)
+    with pytest.raises(InputError, match=words):
+        run(RunConfig("piano", mesh_size=0.2, out=tmp_path / "out", quiet=True,
+                      **arguments), comm=COMM)
 
 
 def test_run_solve_refuses_levels_on_a_msh(tmp_path):
-    with pytest.raises(cli.InputError, match="not a .msh"):
-        cli.run_solve(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
-                      quiet=True, comm=COMM)
+    with pytest.raises(InputError, match="not a .msh"):
+        run(RunConfig(str(tmp_path / "mesh.msh"), levels=2, out=tmp_path / "out",
+                      quiet=True), comm=COMM)
 
 
 def test_nested_run_interrupted_on_the_fine_mesh_resumes_to_the_same_result(tmp_path,
@@ -297,18 +301,18 @@ def test_nested_run_interrupted_on_the_fine_mesh_resumes_to_the_same_result(tmp_
 
 def test_auto_levels_keeps_the_coarsest_mesh_above_the_threshold():
     """A quarter of the triangles per level, the coarsest at NESTED_COARSEST or more."""
-    assert cli.auto_levels(1887) == 1
-    assert cli.auto_levels(4 * cli.NESTED_COARSEST - 1) == 1
-    assert cli.auto_levels(4 * cli.NESTED_COARSEST) == 2
-    assert cli.auto_levels(29597) == 3
-    assert cli.auto_levels(10**12) == cli.MAX_LEVELS
+    assert hierarchy.auto_levels(1887) == 1
+    assert hierarchy.auto_levels(4 * hierarchy.NESTED_COARSEST - 1) == 1
+    assert hierarchy.auto_levels(4 * hierarchy.NESTED_COARSEST) == 2
+    assert hierarchy.auto_levels(29597) == 3
+    assert hierarchy.auto_levels(10**12) == hierarchy.MAX_LEVELS
 
 
 def test_run_solve_auto_levels_nests_a_fine_mesh(tmp_path):
     """The default (--levels auto) on 7.5e3 triangles: two meshes, 1887 then 7539 triangles,
     each meshed by Gmsh, and the result converged on the fine one."""
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
-    summary = cli.run_solve("piano", mesh_size=0.025, out=out, quiet=True, comm=COMM)
+    summary = run(RunConfig("piano", mesh_size=0.025, out=out, quiet=True), comm=COMM)
     assert [e["triangles"] for e in summary["levels"]] == [1887, summary["num_cells"]]
     assert summary["converged"]
     assert sorted(s["index"] for s in summary["singularities"]) == [-0.25, 0.25]
@@ -321,7 +325,7 @@ def test_default_solve_stays_within_the_growth_bound(tmp_path):
     at most 1.3x per 2x refinement (measured: 14 and 14 steps, 2 iterations a step at
     both; one mesh at h = 0.025 took 39 steps, before the hybrid model 72 against 45)."""
     root = Path(COMM.bcast(str(tmp_path), root=0))
-    runs = [cli.run_solve("piano", mesh_size=h, out=root / f"h{h}", quiet=True, comm=COMM)
+    runs = [run(RunConfig("piano", mesh_size=h, out=root / f"h{h}", quiet=True), comm=COMM)
             for h in (0.05, 0.025)]
     steps = [s["iterations"] for s in runs]
     assert "levels" not in runs[0] and len(runs[1]["levels"]) == 2
@@ -340,8 +344,8 @@ def test_run_solve_nested_meshes_splits_the_coarsest(tmp_path):
     """--nested-meshes: the fine mesh is the coarse one split once (4x its triangles), a
     converged solve there from the coarse solution, MBO's singularities kept."""
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
-    summary = cli.run_solve("piano", mesh_size=0.05, out=out, quiet=True, comm=COMM, levels=2,
-                            nested_meshes=True)
+    summary = run(RunConfig("piano", mesh_size=0.05, out=out, quiet=True, levels=2,
+                            nested_meshes=True), comm=COMM)
     coarse, fine = (e["triangles"] for e in summary["levels"])
     assert fine == 4 * coarse == summary["num_cells"]
     assert summary["converged"]
@@ -367,22 +371,24 @@ def test_nested_meshes_fall_back_one_level_when_the_coarsest_fails(monkeypatch):
     monkeypatch.setattr(ufl_frames.mesh, "build_nested", build_nested)
     domain = build(COMM, "piano", mesh_size=0.05)
     said = []
-    coarse, fine = cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, True,
-                                      said.append)
+    *coarse, fine = hierarchy.nested_domains(COMM, "piano", domain, 3, 0.05,
+                                             nested_meshes=True, drop_failing=True,
+                                             say=said.append)
     assert len(coarse) == 1 and fine.num_cells == 4 * coarse[0].num_cells
     assert any("too coarse to mesh: one level fewer" in line for line in said)
-    with pytest.raises(cli.InputError, match="--levels 3 --nested-meshes: too coarse"):
-        cli._nested_meshes(COMM, "piano", domain, 3, 0.05, 1.0, {}, False, said.append)
+    with pytest.raises(GeometryError, match="--levels 3 --nested-meshes: too coarse"):
+        hierarchy.nested_domains(COMM, "piano", domain, 3, 0.05, nested_meshes=True,
+                                 say=said.append)
 
 
 def test_a_coarse_level_must_keep_the_holes():
     from types import SimpleNamespace
 
     with pytest.raises(GeometryError, match="Euler characteristic 1, not 0"):
-        cli._check_same_topology(SimpleNamespace(euler_characteristic=1),
-                                 SimpleNamespace(euler_characteristic=0), 4)
-    cli._check_same_topology(SimpleNamespace(euler_characteristic=0),
-                             SimpleNamespace(euler_characteristic=0), 4)
+        hierarchy.check_same_topology(SimpleNamespace(euler_characteristic=1),
+                                      SimpleNamespace(euler_characteristic=0), 4)
+    hierarchy.check_same_topology(SimpleNamespace(euler_characteristic=0),
+                                  SimpleNamespace(euler_characteristic=0), 4)
 
 
 def test_checkpoints_without_a_pin_radius_resume_as_radius_zero(tmp_path):

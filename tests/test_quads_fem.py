@@ -1,4 +1,4 @@
-"""Quad meshes of distributed frame fields (FrameField.quadrangulate, --quads), serial and MPI.
+"""Quad meshes of distributed frame fields (pipeline.stages.quadrangulate, --quads), serial and MPI.
 
 Truth: the optimised piano field has exactly two singularities, +1/4 and −1/4; its quad
 mesh must have exactly one interior vertex of valence 3 and one of valence 5 and no other
@@ -13,9 +13,13 @@ from pathlib import Path
 import pytest
 from mpi4py import MPI
 
-from ufl_frames import cli
+from ufl_frames.app.failures import RunError
+from ufl_frames.app.run import RunConfig, run
 from ufl_frames.mesh import piano
 from ufl_frames.pipeline import FrameField
+from ufl_frames.pipeline.files import write_quads
+from ufl_frames.pipeline.report import field_summary
+from ufl_frames.pipeline.stages import quadrangulate
 
 COMM = MPI.COMM_WORLD
 
@@ -33,7 +37,8 @@ def piano_fields(request):
 
 @pytest.mark.parametrize("quad_size", [0.1, 0.05])
 def test_piano_quads_have_exactly_the_fields_two_singularities(piano_fields, quad_size):
-    found = {name: field.quadrangulate(quad_size) for name, field in piano_fields.items()}
+    found = {name: quadrangulate(field, quad_size).quality
+             for name, field in piano_fields.items()}
     world = found["world"]
     assert world["valid"] and world["problems"] == []
     assert world["interior_valence"].get("3") == 1 and world["interior_valence"].get("5") == 1
@@ -52,13 +57,14 @@ def test_piano_quads_have_exactly_the_fields_two_singularities(piano_fields, qua
 
 def test_quad_files_read_back(piano_fields, tmp_path):
     field = piano_fields["world"]
-    quality = field.quadrangulate(0.1)
+    quads = quadrangulate(field, 0.1)
+    quality = quads.quality
     out = Path(COMM.bcast(str(tmp_path), root=0)) / "out"
     if COMM.rank == 0:
         out.mkdir()
     COMM.Barrier()
-    assert field.write_quads(out, "piano") == ["quads.msh", "quads.vtu", "quads.png"]
-    assert field.summary()["quads"] == quality
+    assert write_quads(out, quads, "piano", COMM) == ["quads.msh", "quads.vtu", "quads.png"]
+    assert field_summary(field, quads=quads)["quads"] == quality
     import ufl
     from dolfinx import fem
     from dolfinx.io import gmsh as gmshio
@@ -77,8 +83,8 @@ def test_quad_files_read_back(piano_fields, tmp_path):
 
 def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     out = Path(COMM.bcast(str(tmp_path), root=0))
-    summary = cli.run_solve("annulus", mesh_size=0.1, max_it=50, out=out / "a", quiet=True,
-                            comm=COMM, quads=True, quad_size=0.1)
+    summary = run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "a", quiet=True,
+                            quads=True, quad_size=0.1), comm=COMM)
     assert {"quads.msh", "quads.vtu", "quads.png"} <= set(summary["files"])
     found = summary["quads"]
     assert found["valid"] and found["irregular_vertices"] == 0
@@ -86,8 +92,8 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     n_theta = found["vertices"] - found["quads"]
     assert n_theta >= 8 and found["quads"] % n_theta == 0
     assert found["interior_valence"] == {"4": found["quads"] - n_theta}
-    with pytest.raises(cli.RunError, match="cannot make quads of this field: .*quad size"):
-        cli.run_solve("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True,
-                      comm=COMM, quads=True, quad_size=2.0)
+    with pytest.raises(RunError, match="cannot make quads of this field: .*quad size"):
+        run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True, quads=True,
+                      quad_size=2.0), comm=COMM)
     COMM.Barrier()  # rank 0 removes what the run wrote (its checkpoint folder)
     assert not (out / "b").exists()

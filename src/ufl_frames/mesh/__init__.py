@@ -22,35 +22,32 @@ Gmsh runs on rank 0 only; errors are raised on every rank as :class:`GeometryErr
 with a one-line message.
 """
 
+import importlib
+
 from ufl_frames.bootstrap import init_petsc
 
-init_petsc()  # before the submodules import DOLFINx or Gmsh
+#: The public names and their modules. They are imported on first use (PEP 562), so that
+#: :mod:`ufl_frames.mesh.hierarchy`'s constants can be read while the command line is
+#: parsed, before PETSc is initialised with its options.
+_EXPORTS = {
+    "build": "builders", "build_nested": "builders",
+    "KNOWN_GEOMETRIES": "builtin", "annulus": "builtin", "piano": "builtin",
+    "piano_area": "builtin", "piano_perimeter": "builtin", "piano_points": "builtin",
+    "Corner": "domain", "Domain": "domain", "GeometryError": "domain",
+    "MeshTimeLimit": "domain", "load": "files", "mesh_time_limit": "files",
+}
 
-from ufl_frames.mesh.builders import build, build_nested  # noqa: E402
-from ufl_frames.mesh.builtin import (  # noqa: E402
-    KNOWN_GEOMETRIES,
-    annulus,
-    piano,
-    piano_area,
-    piano_perimeter,
-    piano_points,
-)
-from ufl_frames.mesh.domain import Corner, Domain, GeometryError, MeshTimeLimit  # noqa: E402
-from ufl_frames.mesh.files import load, mesh_time_limit  # noqa: E402
+__all__ = sorted(_EXPORTS)
 
-__all__ = [
-    "Corner",
-    "Domain",
-    "GeometryError",
-    "KNOWN_GEOMETRIES",
-    "MeshTimeLimit",
-    "annulus",
-    "build",
-    "build_nested",
-    "load",
-    "mesh_time_limit",
-    "piano",
-    "piano_area",
-    "piano_perimeter",
-    "piano_points",
-]
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'ufl_frames.mesh' has no attribute {name!r}")
+    init_petsc()  # before the submodules import DOLFINx or Gmsh
+    value = getattr(importlib.import_module(f"ufl_frames.mesh.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -11,10 +11,14 @@ angles of the CAD curves' tangents come from the same arrays.
 import math
 from dataclasses import dataclass
 
-import gmsh
-import numpy as np
+from ufl_frames.bootstrap import init_petsc
 
-from ufl_frames.mesh.domain import NO_CURVE, Corner, GeometryError, lookup
+init_petsc()
+
+import gmsh  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ufl_frames.mesh.domain import NO_CURVE, Corner, GeometryError, lookup  # noqa: E402
 
 
 def surfaces() -> list[int]:

@@ -4,12 +4,16 @@ and the nested meshes of one geometry."""
 import numbers
 from pathlib import Path
 
-from mpi4py import MPI
+from ufl_frames.bootstrap import init_petsc
 
-from ufl_frames.mesh.builtin import BUILTIN_MESH_SIZE, KNOWN_GEOMETRIES
-from ufl_frames.mesh.domain import Domain, GeometryError, check_mesh_size, check_positive
-from ufl_frames.mesh.files import CAD_EXTENSIONS, GEO_EXTENSIONS, MESH_EXTENSIONS, load
-from ufl_frames.mesh.meshing import MAX_TRIANGLES
+init_petsc()
+
+from mpi4py import MPI  # noqa: E402
+
+from ufl_frames.mesh.builtin import BUILTIN_MESH_SIZE, KNOWN_GEOMETRIES  # noqa: E402
+from ufl_frames.mesh.domain import Domain, GeometryError, check_mesh_size, check_positive  # noqa: E402
+from ufl_frames.mesh.files import CAD_EXTENSIONS, GEO_EXTENSIONS, MESH_EXTENSIONS, load  # noqa: E402
+from ufl_frames.mesh.meshing import MAX_TRIANGLES  # noqa: E402
 
 
 def build(

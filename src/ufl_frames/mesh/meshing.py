@@ -14,11 +14,15 @@ whose curves cross (Gmsh's meshing never ends on them).
 import math
 from dataclasses import dataclass
 
-import gmsh
-import numpy as np
+from ufl_frames.bootstrap import init_petsc
 
-from ufl_frames.mesh.arrays import signed_areas, triangles_of_model
-from ufl_frames.mesh.domain import GeometryError
+init_petsc()
+
+import gmsh  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ufl_frames.mesh.arrays import signed_areas, triangles_of_model  # noqa: E402
+from ufl_frames.mesh.domain import GeometryError  # noqa: E402
 
 #: Triangles aimed at by the default size of a file that sets no sizes of its own.
 AUTO_TRIANGLES = 2000

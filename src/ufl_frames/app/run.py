@@ -1,0 +1,617 @@
+"""One run of ``ufl-frames solve``: a :class:`RunConfig`, and :func:`run` doing
+mesh → field → stages → report → folder.
+
+::
+
+    summary = run(RunConfig("piano", mesh_size=0.05, param=True, out="out_piano"))
+
+Importing this module starts nothing (no PETSc, no DOLFINx): :func:`run` starts PETSc
+(without command-line options, unless the caller started it first) when it is called.
+"""
+
+import hashlib
+import math
+import os
+import re
+import sys
+import time
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from ufl_frames import __version__, interrupts
+from ufl_frames.app.failures import InputError, OutputFolderError, RunError, failures
+from ufl_frames.bootstrap import init_petsc, options_scope
+from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
+from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
+
+__all__ = ["RunConfig", "check_output_folder", "default_output_folder", "run"]
+
+PROG = "ufl-frames"
+DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.mesh.load
+DEFAULT_MAX_IT = 500
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """What one run is asked to do: the options of ``ufl-frames solve``.
+
+    ``geometry`` is a built-in shape's name or a file (:func:`ufl_frames.mesh.build`);
+    ``out`` the output folder (default ``out_<geometry stem>``; with ``resume``, the
+    folder resumed from); the rest as the command's options of the same names
+    (``ufl-frames solve --help``). Checked by :func:`run`, not here.
+    """
+
+    geometry: str
+    isotropic: bool = False
+    mesh_size: float | None = DEFAULT_MESH_SIZE
+    size_factor: float = 1.0
+    max_triangles: float | None = None
+    mesh_time_limit: float | None = None
+    max_it: int = DEFAULT_MAX_IT
+    out: str | Path | None = None
+    force: bool = False
+    resume: str | Path | None = None
+    max_aspect: float = DEFAULT_MAX_ASPECT
+    free_singularities: bool = False
+    pin_radius: float = 0.0
+    levels: int | str = "auto"
+    nested_meshes: bool = False
+    conformal: bool = False
+    param: bool = False
+    quads: bool = False
+    quad_size: float | None = None
+    quiet: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "geometry", str(self.geometry))
+
+    @classmethod
+    def from_args(cls, args) -> "RunConfig":
+        """The config of parsed ``solve`` arguments (an argparse namespace)."""
+        return cls(**{item.name: getattr(args, item.name) for item in fields(cls)})
+
+    @property
+    def label(self) -> str:
+        """The geometry's stem, for figure titles."""
+        return Path(self.geometry).stem
+
+
+# --- progress ---------------------------------------------------------------------------
+
+
+class Printer:
+    """``say(text)``: print on rank 0 (flushed), or nothing when ``quiet``; a closed
+    stdout (``ufl-frames ... | head``) silences it and the run goes on."""
+
+    def __init__(self, comm, quiet: bool):
+        self.comm, self.quiet, self.closed = comm, quiet, False
+
+    def __call__(self, text: str) -> None:
+        if self.quiet or self.closed or self.comm.rank != 0:
+            return
+        try:
+            print(text, flush=True)
+        except BrokenPipeError:  # `ufl-frames ... | head`: the run goes on, silent
+            self.closed = True
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
+
+
+def warn(comm, quiet: bool, text: str) -> None:
+    """``ufl-frames: warning: <text>`` on stderr (rank 0, unless ``quiet``)."""
+    if not quiet and comm.rank == 0:
+        print(f"{PROG}: warning: {text}", file=sys.stderr)
+
+
+# --- checks before anything is computed ---------------------------------------------------
+
+
+def _nearest_existing(path: Path) -> Path:
+    path = path.absolute()
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _output_folder_problem(out: Path, force: bool, resuming: bool = False) -> str | None:
+    """Why ``out`` cannot be the output folder, or None (checked on one rank); when
+    ``resuming``, its ``checkpoint`` folder is the run's own."""
+    if out.is_symlink() and not out.exists():
+        return f"output path {str(out)!r} is a broken symbolic link"
+    target = Path(os.path.abspath(out)) if not out.is_symlink() else out.resolve()
+    if target.parent == target:
+        return f"output folder {str(out)!r} is a file system root: choose a folder in it"
+    if out.exists():
+        if not out.is_dir():
+            return f"output path {str(out)!r} exists and is not a folder"
+        entries = {p.name for p in out.iterdir()}
+        if not force and entries == {"checkpoint"} and not resuming:
+            return (f"output folder {str(out)!r} holds the checkpoint of an interrupted run: "
+                    f"resume it with --resume {out}, or start again with --force")
+        if not force and entries - ({"checkpoint"} if resuming else set()):
+            return f"output folder {str(out)!r} exists and is not empty (use --force to overwrite)"
+        if not os.access(out, os.W_OK | os.X_OK):
+            return f"output folder {str(out)!r} is not writable"
+        if not os.access(target.parent, os.W_OK | os.X_OK):
+            return (f"cannot write to output folder {str(out)!r}: the results are written next "
+                    f"to it first, and {str(target.parent)!r} is not writable")
+        return None
+    parent = _nearest_existing(out)
+    if not parent.is_dir():
+        return f"cannot create output folder {str(out)!r}: {str(parent)!r} is not a folder"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"cannot create output folder {str(out)!r}: {str(parent)!r} is not writable"
+    return None
+
+
+def check_output_folder(out, force: bool, comm, resuming: bool = False) -> None:
+    """Raise :class:`OutputFolderError` on every rank if ``out`` cannot be used (collective).
+
+    Checked on rank 0 and broadcast, so that all ranks agree even when another rank
+    has already started writing.
+    """
+    problem = _output_folder_problem(Path(out), force, resuming) if comm.rank == 0 else None
+    problem = comm.bcast(problem, root=0)
+    if problem is not None:
+        raise OutputFolderError(problem)
+
+
+def default_output_folder(geometry: str) -> Path:
+    """``out_<stem>``: ``out_piano`` for ``piano``, ``out_part`` for ``meshes/part.step``."""
+    return Path(f"out_{Path(str(geometry)).stem}")
+
+
+def _output_path(config: RunConfig) -> Path:
+    """The folder the run writes to: ``resume``'s, else ``out``, else the default."""
+    out = config.out
+    if config.resume is not None:
+        if out is not None and os.path.abspath(out) != os.path.abspath(config.resume):
+            raise InputError("out and resume name different folders")
+        out = config.resume
+    return default_output_folder(config.geometry) if out is None else Path(out)
+
+
+def _finite_real(value) -> bool:
+    """Whether ``value`` is a finite int or float (not a bool)."""
+    real = isinstance(value, (int, float)) and not isinstance(value, bool)
+    return real and math.isfinite(value)
+
+
+def _check_config(config: RunConfig, petsc_options: dict) -> None:
+    """Raise :class:`InputError` for a parameter or PETSc option the run cannot take."""
+    from ufl_frames.mesh.hierarchy import check_levels
+
+    mesh_size, max_it, pin_radius = config.mesh_size, config.max_it, config.pin_radius
+    if mesh_size is not None and not (_finite_real(mesh_size) and mesh_size > 0):
+        raise InputError(f"mesh size must be a positive number, got {mesh_size!r}")
+    if isinstance(max_it, bool) or not isinstance(max_it, int) or not 0 < max_it <= MAX_INT:
+        raise InputError(f"max-it must be a positive integer at most {MAX_INT}, got {max_it!r}")
+    try:
+        check_levels(config.levels, config.geometry, config.conformal)
+    except ValueError as e:
+        raise InputError(str(e)) from e
+    if not (_finite_real(pin_radius) and pin_radius >= 0):
+        raise InputError(f"pin radius must be a number >= 0, got {pin_radius!r}")
+    if pin_radius > 0 and config.free_singularities:
+        raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
+                         "with --free-singularities")
+    problem = petsc_option_problem(petsc_options)
+    if problem is not None:
+        raise InputError(problem)
+
+
+#: PETSc options that change what a run prints, not what it computes: not compared
+#: when resuming.
+_OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info$")
+
+
+def run_record(config: RunConfig, comm, petsc_options: dict) -> dict:
+    """The settings that decide a run's result, for its checkpoint (collective): the
+    geometry by name or by the SHA-256 of its file, the PETSc options but for monitors."""
+    from ufl_frames import mesh as geometry_module
+
+    geometry, identity = config.geometry, None
+    if geometry in geometry_module.KNOWN_GEOMETRIES:
+        identity = geometry
+    elif comm.rank == 0:
+        try:
+            identity = "sha256:" + hashlib.sha256(Path(geometry).read_bytes()).hexdigest()
+        except OSError:
+            identity = None  # meshing reports it
+    identity = comm.bcast(identity, root=0)
+    record = {"geometry": geometry, "geometry_id": identity}
+    for name in ("isotropic", "mesh_size", "size_factor", "max_triangles", "max_aspect",
+                 "free_singularities", "pin_radius", "max_it", "conformal", "levels",
+                 "nested_meshes"):
+        record[name] = getattr(config, name)
+    record["pin_radius"] = float(record["pin_radius"])
+    record["petsc_options"] = sorted([name, value] for name, value in petsc_options.items()
+                                     if not _OUTPUT_ONLY_OPTION.search(name))
+    for name in ("mesh_size", "size_factor", "max_triangles", "max_aspect"):
+        if record[name] is not None:
+            record[name] = float(record[name])
+    return record
+
+
+def _saved_checkpoint(config: RunConfig, out: Path, record: dict, comm) -> dict | None:
+    """The checkpoint ``--resume`` goes on from (checked against ``record``), or None."""
+    from ufl_frames import checkpoint as checkpoints
+
+    if config.resume is None:
+        return None
+    try:
+        saved = checkpoints.read(out, comm)
+        checkpoints.check_run(saved, record, out)
+    except checkpoints.CheckpointError as e:
+        raise InputError(str(e)) from e
+    return saved
+
+
+# --- the run ---------------------------------------------------------------------------------
+
+
+def _mesh(config: RunConfig, comm, say) -> list:
+    """The meshes of the run, coarsest first (:func:`ufl_frames.mesh.hierarchy.nested_domains`
+    of the mesh at the size asked for; one for ``conformal`` with 'auto' levels)."""
+    from ufl_frames import mesh as geometry_module
+    from ufl_frames.mesh.hierarchy import nested_domains
+
+    size = ("relative to the shape" if config.mesh_size is None
+            else f"mesh size {config.mesh_size:g}")
+    say(f"meshing {config.geometry} ({size}) ...")
+    limit = {} if config.max_triangles is None else {"max_triangles": config.max_triangles}
+    limit["time_limit"] = config.mesh_time_limit
+    interrupts.set_stage("meshing")
+    try:
+        domain = geometry_module.build(comm, config.geometry, config.mesh_size,
+                                       config.size_factor, **limit)
+    except geometry_module.MeshTimeLimit as e:  # raised identically on every rank
+        raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
+    except geometry_module.GeometryError as e:  # raised identically on every rank
+        raise InputError(str(e)) from e
+    levels = 1 if config.conformal and config.levels == "auto" else config.levels
+    try:
+        return nested_domains(comm, config.geometry, domain, levels, config.mesh_size,
+                              config.size_factor, nested_meshes=config.nested_meshes,
+                              say=say, **limit)
+    except geometry_module.GeometryError as e:  # raised identically on every rank
+        raise InputError(str(e)) from e
+
+
+def run(config: RunConfig, comm=None) -> dict:
+    """Mesh → MBO → TAO (or the conformal scale) → singularities (→ the map (U, V), the
+    quad mesh) → files in the output folder; the summary, on every rank (collective).
+
+    Args:
+        config: what to do.
+        comm: the communicator (default ``MPI.COMM_WORLD``).
+
+    Returns:
+        The record written to ``summary.json``.
+
+    Raises:
+        InputError: on every rank, before anything is computed or written, when the
+            input is unusable (a :class:`ufl_frames.mesh.GeometryError`, a bad
+            parameter or PETSc option in the database, an existing non-empty output
+            folder, a coarse level of a given ``levels`` that fails or loses a hole).
+        RunError: a solve, a stage or writing the results fails on every rank alike
+            (a PETSc error, no valid quad mesh at the size, a full disk).
+
+    Other exceptions are bugs and keep their type. The output folder is written whole or
+    not at all (:class:`ufl_frames.output.OutputFolder`). PETSc options in the database
+    (``-tao_type`` ...) are honoured; the defaults the solvers add to the database are
+    removed afterwards.
+    """
+    init_petsc()
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    from ufl_frames import checkpoint as checkpoints
+
+    comm = MPI.COMM_WORLD if comm is None else comm
+    say = Printer(comm, config.quiet)
+    start = time.perf_counter()
+    petsc_options = PETSc.Options().getAll()
+    out = _output_path(config)
+    _check_config(config, petsc_options)
+    record = run_record(config, comm, petsc_options)
+    saved = _saved_checkpoint(config, out, record, comm)
+    check_output_folder(out, config.force, comm, resuming=config.resume is not None)
+    domains = _mesh(config, comm, say)
+    domain = domains[-1]
+    interrupts.set_stage("the MBO initial field")
+    interrupts.raise_if_interrupted(comm)
+    for note in domain.notes:
+        say(f"  note: {note}")
+    say(f"  {domain.num_vertices} vertices, {domain.num_cells} triangles (mean edge "
+        f"{domain.mesh_size:.3g}), {comm.size} process{'es' if comm.size > 1 else ''}")
+    key = checkpoints.mesh_key(domain.mesh)
+    if saved is not None and saved["mesh_key"] != key:
+        raise InputError(f"cannot resume: the checkpoint in {str(out)!r} is of another mesh "
+                         "(the geometry or its meshing changed); start again with --force")
+    store = checkpoints.CheckpointFolder(out, comm, record, key, existing=saved is not None)
+    interrupts.note_checkpoint(out if saved is not None else None)
+    try:
+        solve = _Solve(config, comm, say, out, store, saved)
+        solve.solve(domains)
+        solve.report()
+        solve.stages()
+        return solve.write(start, petsc_options)
+    except KeyboardInterrupt:  # Interrupted too: the checkpoint, if any, is for --resume
+        raise
+    except BaseException:
+        store.discard()  # a failed run leaves nothing (a checkpoint resumed from stays)
+        raise
+    finally:
+        interrupts.note_checkpoint(None)
+
+
+class _Solve:
+    """The run after meshing: the field's solve with its monitors and checkpoints, the
+    report, the stages and the output folder (the steps of :func:`run`).
+
+    ``store`` is the checkpoint folder the solve saves to, ``saved`` the checkpoint
+    resumed from (None without ``--resume``).
+    """
+
+    def __init__(self, config: RunConfig, comm, say, out: Path, store, saved: dict | None):
+        self.config, self.comm, self.say, self.out = config, comm, say, out
+        self.store, self.saved = store, saved
+        self.field = None
+        self.result = None  # the TAO solve's (None for the conformal scale)
+        self.state = None  # the checkpoint resumed from
+        self.tao_type = None
+        self.max_it = config.max_it  # -tao_max_it wins
+        self.param = self.quads = None  # the stages' records
+        self._finest_space = None
+        self._levels = 1
+
+    # --- monitors and checkpoints ---
+
+    def mbo_monitor(self, level, tau, change):
+        self.say(f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}")
+        interrupts.raise_if_interrupted(self.comm)
+
+    def tao_monitor(self, e):  # interrupts are taken by keep(), called just before
+        self.say(f"  it {e['it']:4d}  H {e['H']:.6e}  E {e['E']:.6e}  |grad| {e['gnorm']:.3e}"
+                 + (f"  ksp {e['ksp_its']}" if "ksp_its" in e else "")
+                 + (f"  factorisations {e['factorisations']}"
+                    if e.get("factorisations", 1) > 1 else ""))
+
+    def level_monitor(self, entry):
+        self.say(f"mesh {entry['level'] + 1}/{self._levels}: {entry['triangles']} "
+                 f"triangles, {entry['reason']} after {entry['iterations']} iterations "
+                 f"({entry['seconds']:.2f} s), H {entry['H']:.4e}")
+
+    def keep(self, state, V=None):
+        """Save ``state`` (of the field on ``V``, default the field's) every
+        CHECKPOINT_EVERY steps and when interrupted, then stop if interrupted (at each TAO
+        iterate, before the monitor prints)."""
+        from ufl_frames import checkpoint as checkpoints
+
+        signum = interrupts.pending(self.comm)
+        if state.iterations > 0 and (signum or
+                                     state.iterations % checkpoints.CHECKPOINT_EVERY == 0):
+            self.store.save(state, self.field.q.function_space if V is None else V)
+            interrupts.note_checkpoint(self.out)
+        interrupts.raise_if_interrupted(self.comm, signum)
+
+    def restore(self, V):
+        """The checkpoint resumed from, on the space ``V`` (None without one)."""
+        from ufl_frames import checkpoint as checkpoints
+
+        if self.saved is None:
+            return None
+        try:
+            state = checkpoints.restore(self.saved, V, self.comm)
+        except checkpoints.CheckpointError as e:
+            raise InputError(str(e)) from e
+        self.say(f"resuming from the checkpoint at iteration {state.iterations} ...")
+        return state
+
+    def restore_finest(self, V):
+        """:meth:`restore` for the finest level of nested iteration (its space kept)."""
+        self._finest_space = V
+        self.state = self.restore(V)
+        return self.state
+
+    def keep_finest(self, state, finest):
+        """:meth:`keep` for nested iteration: checkpoints of the finest mesh only."""
+        if finest:
+            self.keep(state, self._finest_space)
+        else:
+            interrupts.raise_if_interrupted(self.comm, interrupts.pending(self.comm))
+
+    # --- the solve ---
+
+    def solve(self, domains: list) -> None:
+        """MBO → TAO (from the checkpoint, if any) on ``domains[-1]``; nested iteration
+        over ``domains`` where there are several; the conformal scale instead of TAO."""
+        from petsc4py import PETSc
+
+        from ufl_frames import solvers
+        from ufl_frames.pipeline import FrameField
+
+        config = self.config
+        with options_scope():  # the solvers' defaults end with the run
+            if len(domains) == 1:  # nested iteration runs MBO on its coarsest mesh only
+                self.say("MBO initial field ...")
+                with failures("the MBO initial field"):
+                    self.field = FrameField.initial(domains[0], isotropic=config.isotropic,
+                                                    max_aspect=config.max_aspect,
+                                                    monitor=self.mbo_monitor)
+            self.tao_type = PETSc.Options().getString("tao_type",
+                                                      solvers.DEFAULT_OPTIONS["tao_type"])
+            if config.conformal:
+                self._conformal()
+            elif len(domains) > 1:
+                self._nested(domains)
+            else:
+                self._single()
+            self.max_it = PETSc.Options().getInt("tao_max_it", config.max_it)
+
+    @property
+    def _kind(self) -> str:
+        return "isotropic frames" if self.config.isotropic else "frames"
+
+    def _conformal(self) -> None:
+        self.tao_type = None
+        interrupts.set_stage("the conformal scale")
+        self.say("conformal scale (isotropic frames of the MBO directions) ...")
+        with failures("the conformal-scale solve"):
+            self.field = self.field.conformal()
+
+    def _nested(self, domains: list) -> None:
+        from ufl_frames.pipeline import FrameField
+
+        config, tao_type = self.config, self.tao_type
+        interrupts.set_stage(f"the TAO solve ({tao_type}), nested")
+        interrupts.raise_if_interrupted(self.comm)
+        self._levels = len(domains)
+        self.say(f"solving ({self._kind}, TAO {tao_type}), nested over {len(domains)} meshes "
+                 f"from {domains[0].num_cells} triangles ...")
+        with failures(f"the TAO solve ({tao_type})"):
+            self.field = FrameField.nested(
+                domains, isotropic=config.isotropic, max_aspect=config.max_aspect,
+                pin_singularities=not config.free_singularities, max_it=config.max_it,
+                pin_radius=config.pin_radius, monitor=self.tao_monitor,
+                mbo_monitor=self.mbo_monitor, level_monitor=self.level_monitor,
+                checkpoint=self.keep_finest, restore=self.restore_finest)
+        self.result = self.field.result
+
+    def _single(self) -> None:
+        config, tao_type = self.config, self.tao_type
+        interrupts.set_stage(f"the TAO solve ({tao_type})")
+        interrupts.raise_if_interrupted(self.comm)
+        self.state = self.restore(self.field.q.function_space)
+        self.say(f"solving ({self._kind}, TAO {tao_type}) ...")
+        with failures(f"the TAO solve ({tao_type})"):
+            self.result = self.field.solve(
+                pin_singularities=not config.free_singularities, max_it=config.max_it,
+                pin_radius=config.pin_radius, monitor=self.tao_monitor,
+                checkpoint=self.keep, resume=self.state)
+
+    # --- what was found ---
+
+    def report(self) -> None:
+        """The solve's outcome, the singularities and Poincaré–Hopf, on stdout (and a
+        warning on stderr where TAO did not converge or the indices do not add up)."""
+        from ufl_frames import output
+
+        interrupts.set_stage("writing the results")
+        interrupts.raise_if_interrupted(self.comm)
+        result, quiet = self.result, self.config.quiet
+        if result is not None:
+            self.say(f"{result.converged_reason} after {result.iterations} iterations "
+                     f"({result.wall_time_s:.2f} s): H {result.H_initial:.4e} -> "
+                     f"{result.H_final:.4e}")
+            if not result.converged_reason.startswith("CONVERGED"):
+                warn(self.comm, quiet, f"TAO stopped with {result.converged_reason}")
+        self.say(f"singularities: {output.describe_singularities(self.field.singularities)}")
+        check = self.field.index_theorem()  # also in the summary
+        if not check["agrees"]:
+            warn(self.comm, quiet,
+                 f"the singularities' indices sum to {check['index_sum']:g}, Poincaré–Hopf "
+                 f"says {check['expected']:g} (Euler characteristic "
+                 f"{self.field.domain.euler_characteristic}, {check['corners']} corners): the "
+                 "boundary is too coarse for the field somewhere; try a smaller --mesh-size")
+
+    def stages(self) -> None:
+        """With ``param``, the seamless map; with ``quads``, the quad mesh: both from one
+        gather of the field and one cut mesh on rank 0."""
+        from ufl_frames.pipeline import stages
+
+        config, say = self.config, self.say
+        root = None
+        if config.param:
+            with failures("the parametrisation"):
+                root = stages.RootField(self.field)
+                self.param = stages.parametrise(root, quad_size=config.quad_size)
+            quality = self.param.quality
+            say(f"parametrisation: misfit {quality['misfit']:.4f}, "
+                f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
+                f"of length {quality['cut_length']:.3g}")
+            interrupts.raise_if_interrupted(self.comm)
+        if config.quads:
+            interrupts.set_stage("the quad mesh")
+            say("quad mesh ...")
+            with failures("the quad mesh"):
+                try:
+                    root = stages.RootField(self.field) if root is None else root
+                    self.quads = stages.quadrangulate(root, quad_size=config.quad_size)
+                except ValueError as e:  # no valid integer-grid map: the same on every rank
+                    raise RunError(str(e)) from e
+            found = self.quads.quality
+            say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
+                f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
+                f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
+                + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
+            interrupts.raise_if_interrupted(self.comm)
+
+    # --- the output folder ---
+
+    def write(self, start: float, petsc_options: dict) -> dict:
+        """The files and ``summary.json`` into the output folder, whole or not at all; the
+        summary."""
+        from ufl_frames import checkpoint as checkpoints
+        from ufl_frames import output
+
+        config, comm, out = self.config, self.comm, self.out
+        ours = (checkpoints.FOLDER,) if self.store.written else ()
+        folder = output.OutputFolder(out, force=config.force, comm=comm, ours=ours)
+        try:
+            with failures(f"writing the results to {str(out)!r}", writing=True):
+                staging = folder.open()
+                interrupts.attach_output(folder)
+                files = self.write_files(staging)
+                summary = self.summary(start, petsc_options, files)
+                output.write_summary(staging / "summary.json", summary, comm=comm)
+                interrupts.raise_if_interrupted(comm)
+                interrupts.set_stage("commit")
+                folder.commit()
+        except BaseException:
+            folder.discard(here=True)  # every rank that fails: perhaps one alone, aborting
+            raise
+        finally:
+            interrupts.attach_output(None)
+        interrupts.set_stage("done")
+        self.say(f"wrote {out}/: {', '.join(files)}")
+        return summary
+
+    def write_files(self, staging: Path) -> list[str]:
+        """The field's and the stages' files into ``staging``; their names, and
+        ``summary.json`` (written last, by :meth:`write`)."""
+        from ufl_frames.pipeline import files
+
+        label, comm = self.config.label, self.comm
+        names = files.write_field(staging, self.field, label=label, tao_type=self.tao_type)
+        if self.param is not None:
+            names += files.write_param(staging, self.param, label, comm)
+        if self.quads is not None:
+            names += files.write_quads(staging, self.quads, label, comm)
+        return [*names, "summary.json"]
+
+    def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:
+        """The record for ``summary.json`` (collective): the field's kind, the run's
+        settings, the findings, the time and the files."""
+        from mpi4py import MPI
+
+        from ufl_frames.pipeline.report import findings_record, frames_record
+
+        config, comm = self.config, self.comm
+        return {
+            "ufl_frames_version": __version__,
+            "geometry": config.geometry,
+            **frames_record(self.field),
+            "size_factor": float(config.size_factor),
+            "loader_notes": list(self.field.domain.notes),
+            "max_it": int(self.max_it),
+            "num_processes": comm.size,
+            "tao_type": self.tao_type,
+            "petsc_options": petsc_options,
+            "resumed_from_iteration": None if self.state is None else self.state.iterations,
+            **findings_record(self.field, self.param, self.quads),
+            "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+            "files": files,
+        }

@@ -1,0 +1,194 @@
+"""What rank 0 makes of a frame field: the seamless map (U, V) and the quad mesh.
+
+::
+
+    root = RootField(field)                     # gathered on rank 0 once (collective)
+    param = parametrise(root)                   # Parametrised: measures, map on rank 0
+    quads = quadrangulate(root, quad_size=0.05) # QuadMeshed: measures, mesh on rank 0
+
+The field is gathered onto rank 0 (:func:`~ufl_frames.param.gather.gather_field`) and cut
+into a disk there (:func:`~ufl_frames.param.cut.cut_mesh`) once per :class:`RootField`:
+both stages start from the same :class:`~ufl_frames.param.cut.CutMesh`. Each stage is
+collective and returns a frozen record whose measures are the same on every rank.
+"""
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc()
+
+from ufl_frames.pipeline.field import FrameField  # noqa: E402
+
+__all__ = ["Parametrised", "QuadMeshed", "RootField", "TRIANGLES_PER_QUAD", "parametrise",
+           "quadrangulate"]
+
+#: Default quad size of :func:`parametrise`: about one quad per this many triangles.
+TRIANGLES_PER_QUAD = 8
+
+
+@dataclass(frozen=True)
+class Parametrised:
+    """The seamless map of a field: ``quality`` its measures
+    (:func:`ufl_frames.param.measures.quality`, the same dict on every rank),
+    ``parametrisation`` the map (:class:`~ufl_frames.param.seamless.Parametrisation`)
+    on rank 0, None elsewhere."""
+
+    quality: dict
+    parametrisation: object | None = field(default=None, repr=False)
+
+
+@dataclass(frozen=True)
+class QuadMeshed:
+    """The quad mesh of a field: ``quality`` its measures (:func:`quadrangulate`, the same
+    dict on every rank), ``mesh`` the :class:`~ufl_frames.quads.extract.QuadMesh` on
+    rank 0, None elsewhere."""
+
+    quality: dict
+    mesh: object | None = field(default=None, repr=False)
+
+
+class RootField:
+    """A frame field gathered onto rank 0 (collective to make), and the disk it is cut
+    into there, made on first use and kept for every later stage.
+
+    ``domain`` is the field's :class:`~ufl_frames.mesh.Domain`; the gathered arrays
+    and the :class:`~ufl_frames.param.cut.CutMesh` live on rank 0 only.
+    """
+
+    def __init__(self, frames: FrameField):
+        from ufl_frames.param.gather import gather_field
+
+        self.domain = frames.domain
+        self._arrays = gather_field(frames.q)  # (x, cells, rows) on rank 0
+        self._cut = None
+
+    def _cut_mesh(self):
+        from ufl_frames.param import cut
+
+        if self._cut is None:
+            self._cut = cut.cut_mesh(*self._arrays)
+        return self._cut
+
+    def on_root(self, work, failure: str):
+        """``work(cut_mesh)`` on rank 0, which returns (what rank 0 keeps, what every rank
+        gets); that pair, the first None on the other ranks (collective). A failure of the
+        cut or of ``work`` raises ValueError("<failure>: <why>") on every rank."""
+        from ufl_frames.quads.extract import ExtractionError
+
+        comm = self.domain.comm
+        kept, shared, error = None, None, None
+        if comm.rank == 0:
+            try:
+                kept, shared = work(self._cut_mesh())
+            except (ValueError, np.linalg.LinAlgError, RuntimeError, ExtractionError) as e:
+                error = f"{failure}: {e}"
+        error = comm.bcast(error, root=0)
+        if error is not None:
+            raise ValueError(error)
+        return kept, comm.bcast(shared, root=0)
+
+
+def _root(source) -> RootField:
+    return source if isinstance(source, RootField) else RootField(source)
+
+
+def parametrise(source, quad_size: float | None = None) -> Parametrised:
+    """The seamless map (U, V) of a field (:mod:`ufl_frames.param`): combed and integrated
+    on rank 0 (collective).
+
+    Args:
+        source: a :class:`~ufl_frames.pipeline.field.FrameField`, or the
+            :class:`RootField` of one (shared with :func:`quadrangulate`).
+        quad_size: the mean edge length of the quads the integer iso-lines of U and V
+            outline (default: about one quad per :data:`TRIANGLES_PER_QUAD` triangles).
+
+    Returns:
+        The map and its measures.
+
+    Raises:
+        ValueError: on every rank, where the field cannot be cut or integrated.
+    """
+    from ufl_frames.param import measures, seamless
+
+    def work(mesh):
+        if quad_size is None:
+            quads = max(1.0, mesh.cells.shape[0] / TRIANGLES_PER_QUAD)
+            scale = seamless.scale_for_quad_count(mesh, quads)
+        else:
+            scale = seamless.scale_for_quad_size(mesh, quad_size)
+        parametrisation = seamless.integrate(mesh, scale)
+        return parametrisation, measures.quality(parametrisation)
+
+    kept, quality = _root(source).on_root(work, "cannot parametrise this field")
+    return Parametrised(quality=quality, parametrisation=kept)
+
+
+def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
+    """The quad mesh of a field (:mod:`ufl_frames.quads`), on rank 0 (collective): the
+    seamless map quantised to an integer-grid map (:func:`~ufl_frames.param.quantise.quantise`),
+    its integer iso-lines traced into quads (:func:`~ufl_frames.quads.extract.extract_quads`),
+    the worst quads improved (:func:`~ufl_frames.quads.improve.improve_worst_quads`).
+
+    Args:
+        source: a :class:`~ufl_frames.pipeline.field.FrameField`, or the
+            :class:`RootField` of one (shared with :func:`parametrise`).
+        quad_size: the quads' target mean edge length (default: the triangles' mean edge
+            length, about one quad per two triangles).
+
+    Returns:
+        The mesh and its measures (:func:`~ufl_frames.quads.measures.quad_quality`, with
+        ``valid``, ``problems``, ``quad_size``, the rounding's and the seconds per stage).
+
+    Raises:
+        ValueError: on every rank, where no valid integer-grid map exists at that size,
+            or its quads are not a valid mesh
+            (:func:`~ufl_frames.quads.measures.check_quad_mesh`: too few for the shape).
+    """
+    from ufl_frames.fem.scales import mean_cell_edge
+
+    root = _root(source)
+    size = mean_cell_edge(root.domain.mesh) if quad_size is None else float(quad_size)
+    kept, quality = root.on_root(lambda mesh: _quad_mesh(mesh, size),
+                                 "cannot make quads of this field")
+    return QuadMeshed(quality=quality, mesh=kept)
+
+
+def _quad_mesh(mesh, size: float):
+    """(the quad mesh, its measures) of the cut mesh ``mesh`` at quad size ``size``."""
+    from ufl_frames.param import measures as param_measures
+    from ufl_frames.param import quantise, seamless
+    from ufl_frames.quads import extract, measures
+    from ufl_frames.quads.improve import improve_worst_quads
+
+    start = time.perf_counter()
+    scale = seamless.scale_for_quad_size(mesh, size)
+    grid_map = quantise.quantise(mesh, scale)
+    quantised = time.perf_counter()
+    quad_mesh = extract.extract_quads(grid_map)
+    extracted = time.perf_counter()
+    as_extracted = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+    quad_mesh = replace(quad_mesh, points=improve_worst_quads(quad_mesh.points,
+                                                              quad_mesh.quads))
+    improved = time.perf_counter()
+    area = float(grid_map.param.area.sum())
+    problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads)
+    if problems:  # the map is valid, but its grid too coarse for the shape
+        raise ValueError(f"at quad size {size:.3g} the quads are not a valid mesh "
+                         f"({problems[0]}); take a smaller quad size")
+    record = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+    record.update(
+        valid=not problems, problems=problems[:5], quad_size=size,
+        area_error=abs(record["area"] - area) / area,
+        misfit_seamless=param_measures.quality(grid_map.seamless)["misfit"],
+        misfit_quantised=param_measures.quality(grid_map.param)["misfit"],
+        rounded=grid_map.rounded, max_rounding=grid_map.max_shift,
+        repaired=grid_map.repaired, cancelled_singularities=grid_map.mesh.cancelled,
+        extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj",
+                                                      "sj_at_least_0_8")},
+        seconds={"quantise": quantised - start, "extract": extracted - quantised,
+                 "improve": improved - extracted})
+    return quad_mesh, record
