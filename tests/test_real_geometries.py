@@ -354,3 +354,48 @@ def test_poincare_hopf_on_test_geometries(tmp_path, name):
     found = singularities.locate_singularities(q)
     check = singularities.index_theorem(found, chi, angles)
     assert check["agrees"], (name, check, found)
+
+
+SLIT_SQUARE = """Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {1, 1, 0};
+Point(4) = {0, 1, 0}; Point(5) = {0, 0.5, 0}; Point(6) = {0.5, 0.5, 0};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 5};
+Line(5) = {5, 6}; Line(6) = {5, 1};
+Curve Loop(1) = {1, 2, 3, 4, 5, -5, 6}; Plane Surface(1) = {1};
+"""
+
+
+def boundary_length(domain):
+    mesh = domain.mesh
+    form = dolfinx.fem.form(dolfinx.fem.Constant(mesh, 1.0) * ufl.ds(domain=mesh))
+    return mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+
+
+def test_a_slit_is_cut_open(tmp_path):
+    """A square whose one surface runs along a slit and back (curve 5 twice in its loop):
+    the mesh is cut open along the slit, so both of its sides are boundary — the boundary
+    is 4 + 2 × 0.5 long — and the domain stays a disk (χ = 1): the slit's nodes are
+    doubled but for its tip, which the triangles surround."""
+    domain = load(COMM, write(tmp_path, "slit.geo", SLIT_SQUARE), 0.05)
+    assert area(domain) == pytest.approx(1.0, rel=1e-12)
+    assert boundary_length(domain) == pytest.approx(5.0, rel=1e-12)
+    assert domain.euler_characteristic == 1
+    assert any("slit" in note for note in domain.notes)
+    # the tip is a corner of a full turn; the slit's base two corners of a quarter turn
+    angles = sorted(round(c.angle / (math.pi / 2)) for c in domain.corners
+                    if math.dist((c.x, c.y), (0.0, 0.5)) < 1e-9
+                    or math.dist((c.x, c.y), (0.5, 0.5)) < 1e-9)
+    assert angles == [1, 1, 4]
+
+
+def test_a_notch_narrower_than_the_probe_is_not_refused(tmp_path):
+    """A V-notch 10⁻⁵ wide at its mouth in one surface: its two sides face each other
+    closer than the check for touching surfaces looks, yet they are one surface's
+    boundary — the shape itself, not surfaces that overlap."""
+    text = """Point(1) = {0, 0, 0}; Point(2) = {0.99999, 0, 0}; Point(3) = {1, 0.4, 0};
+Point(4) = {1.00001, 0, 0}; Point(5) = {2, 0, 0}; Point(6) = {2, 1, 0}; Point(7) = {0, 1, 0};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 5}; Line(5) = {5, 6};
+Line(6) = {6, 7}; Line(7) = {7, 1};
+Curve Loop(1) = {1, 2, 3, 4, 5, 6, 7}; Plane Surface(1) = {1};
+"""
+    domain = load(COMM, write(tmp_path, "notch.geo", text), 0.1)
+    assert area(domain) == pytest.approx(2 - 0.5 * 0.4 * 2e-5, rel=1e-12)

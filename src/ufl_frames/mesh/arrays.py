@@ -54,7 +54,7 @@ def triangles_of_model(notes: list[str] | None = None):
     xyz = coords.reshape(-1, 3)
     row = np.full(int(tags.max(initial=0)) + 1, -1, dtype=np.int64)
     row[tags.astype(np.int64)] = np.arange(tags.size)
-    pieces, converted = [], {}
+    pieces, converted, owners = [], {}, []
     for _, surface in gmsh.model.getEntities(2):
         types, _, nodes = gmsh.model.mesh.getElements(2, surface)
         for kind, element_nodes in zip(types, nodes, strict=True):
@@ -75,9 +75,11 @@ def triangles_of_model(notes: list[str] | None = None):
                 raise GeometryError(f"unsupported 2D element type {name!r}")
             if what:
                 converted[what] = converted.get(what, 0) + e.shape[0]
+            owners.append(np.full(pieces[-1].shape[0], surface, dtype=np.int64))
     if notes is not None:
         notes.extend(f"{n} {what}" for what, n in converted.items())
     cells = np.concatenate(pieces) if pieces else np.zeros((0, 3), dtype=np.int64)
+    cell_surface = np.concatenate(owners) if owners else np.zeros(0, dtype=np.int64)
     edges, edge_curve = [], []
     for _, curve in gmsh.model.getEntities(1):
         types, _, nodes = gmsh.model.mesh.getElements(1, curve)
@@ -90,7 +92,54 @@ def triangles_of_model(notes: list[str] | None = None):
             edge_curve.append(np.full(pairs.shape[0], curve, dtype=np.int64))
     edges = np.concatenate(edges) if edges else np.zeros((0, 2), dtype=np.int64)
     curves = np.concatenate(edge_curve) if edge_curve else np.zeros(0, dtype=np.int64)
-    return xyz, cells, edges, curves, tags
+    return xyz, cells, edges, curves, tags, cell_surface
+
+
+def slit_curves() -> set[int]:
+    """Curves that bound one surface on both of their sides (a slit, a crack: the
+    surface's boundary loop runs along the curve and back)."""
+    slits = set()
+    for _, surface in gmsh.model.getEntities(2):
+        try:
+            boundary = gmsh.model.getBoundary([(2, surface)], combined=False, oriented=True)
+        except Exception:  # a discrete surface without topology: no slits known
+            continue
+        seen = [abs(int(tag)) for dim, tag in boundary if dim == 1]
+        slits |= {c for c in seen if seen.count(c) > 1}
+    return slits
+
+
+def crack(cells: np.ndarray, slit_edges: np.ndarray) -> np.ndarray:
+    """The mesh cut open along ``slit_edges`` (k, 2): per node, the triangles around it
+    that meet across edges other than slit edges share one copy of it, so both sides
+    of a slit become boundary (a slit's tip, which the triangles surround, stays one
+    node). Returns, per corner of ``cells`` (m, 3), the new node, numbered from 0, as an
+    array shaped like ``cells``; node copy j is of old node ``cells.ravel()`` at the
+    first corner labelled j."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    m = cells.shape[0]
+    n = int(cells.max()) + 1
+    slit = set(_edge_keys(slit_edges, n).tolist())
+    # every edge (a, b) of triangle t at its corners i (node a) and i + 1 (node b)
+    corner_a = np.arange(3 * m).reshape(m, 3)
+    a, b = cells.ravel(), cells[:, [1, 2, 0]].ravel()
+    ca, cb = corner_a.ravel(), corner_a[:, [1, 2, 0]].ravel()
+    keys = _edge_keys(np.stack([a, b], axis=1), n)
+    order = np.argsort(keys, kind="stable")
+    k_sorted = keys[order]
+    pair = np.flatnonzero(k_sorted[1:] == k_sorted[:-1])  # interior edges: two half-edges
+    first, second = order[pair], order[pair + 1]
+    joined = ~np.isin(keys[first], list(slit)) if slit else np.ones(first.size, dtype=bool)
+    first, second = first[joined], second[joined]
+    # the half-edges run opposite ways: a of one is b of the other
+    rows = np.concatenate([ca[first], cb[first]])
+    cols = np.concatenate([cb[second], ca[second]])
+    graph = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(3 * m, 3 * m))
+    _, label = connected_components(graph, directed=False)
+    _, new = np.unique(label, return_inverse=True)
+    return new.reshape(m, 3)
 
 
 def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
@@ -114,7 +163,7 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
     """The current Gmsh mesh as checked arrays: used nodes only, planar, valid cells."""
     if len(surfaces()) > 1:  # touching surfaces of a .msh or of a built-in model
         gmsh.model.mesh.removeDuplicateNodes()  # (2 s for 10⁶ triangles: not for one surface)
-    xyz, cells, curve_edges, curves, tags = triangles_of_model(notes)
+    xyz, cells, curve_edges, curves, tags, cell_surface = triangles_of_model(notes)
     if cells.size == 0:
         raise GeometryError(f"{source!r} produced no triangle cells")
     used, cells = np.unique(cells, return_inverse=True)
@@ -141,6 +190,24 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
     if degenerate.any():
         raise GeometryError(f"{source!r} has {int(degenerate.sum())} zero-area triangles")
     cells = np.where((area < 0)[:, None], cells[:, [0, 2, 1]], cells)
+    new_row = np.full(int(tags.size), -1, dtype=np.int64)
+    new_row[used] = np.arange(used.size)
+    node_tags = tags[used]
+    slits = slit_curves()
+    if slits and curve_edges.size:
+        on_slit = np.isin(curves, list(slits))
+        slit_edges = new_row[curve_edges[on_slit]]
+        cracked = crack(cells, slit_edges[np.all(slit_edges >= 0, axis=1)])
+        copy_of = np.empty(int(cracked.max()) + 1, dtype=np.int64)
+        copy_of[cracked.ravel()] = cells.ravel()
+        if copy_of.size > x.shape[0]:
+            notes.append(f"cut open along {len(slits)} slit curve(s): "
+                         f"{copy_of.size - x.shape[0]} nodes doubled")
+        x, cells, node_tags = x[copy_of], cracked, node_tags[copy_of]
+        # a curve's edges name the old nodes: on the slits, map them to both copies
+        curve_edges, curves = _edges_on_copies(curve_edges, curves, new_row, copy_of)
+        new_row = np.arange(copy_of.size)
+        tags = np.arange(copy_of.size)
 
     n = x.shape[0]
     directed = np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]], cells[:, [2, 0]]])
@@ -153,9 +220,8 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
             "triangles (overlapping surfaces)"
         )
     boundary = directed[first[counts == 1]]
+    own_cell = first[counts == 1] % cells.shape[0]
     # Curve of each boundary edge, from the 1D elements (map their nodes to rows first).
-    new_row = np.full(int(tags.size), -1, dtype=np.int64)
-    new_row[used] = np.arange(used.size)
     boundary_curve = np.full(boundary.shape[0], NO_CURVE, dtype=np.int64)
     if curve_edges.size:
         mapped = new_row[curve_edges]
@@ -165,14 +231,35 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
         curve_keys, curve_of = curve_keys[order], curves[ok][order]
         found = lookup(curve_keys, curve_of.astype(float), _edge_keys(boundary, n))
         boundary_curve = np.where(np.isnan(found), NO_CURVE, found).astype(np.int64)
-    _check_conforming(source, x, cells, boundary)
+    _check_conforming(source, x, cells, boundary, cell_surface, own_cell)
     return MeshArrays(x=x, cells=cells, boundary=boundary, boundary_curve=boundary_curve,
-                   gmsh_node=tags[used], edges=mesh_edges)
+                      gmsh_node=node_tags, edges=mesh_edges)
 
 
-def _check_conforming(source: str, x, cells, boundary) -> None:
-    """Refuse boundary edges that lie inside the domain: surfaces that touch or overlap
-    without sharing their nodes (the frame field would see a slit there)."""
+def _edges_on_copies(curve_edges, curves, new_row, copy_of):
+    """The curves' edges (old node tags' rows) in the cracked numbering: an edge whose
+    nodes were doubled is listed once per pair of copies (the lookup keeps the ones that
+    are mesh edges)."""
+    copies = [[] for _ in range(int(new_row.max()) + 1)]
+    for new, old in enumerate(copy_of):
+        copies[old].append(new)
+    pairs, owner = [], []
+    for (ta, tb), curve in zip(new_row[curve_edges], curves, strict=True):
+        if ta < 0 or tb < 0:
+            continue
+        for a in copies[ta]:
+            for b in copies[tb]:
+                pairs.append((a, b))
+                owner.append(curve)
+    return (np.array(pairs, dtype=np.int64).reshape(-1, 2),
+            np.array(owner, dtype=np.int64))
+
+
+def _check_conforming(source: str, x, cells, boundary, cell_surface, own_cell) -> None:
+    """Refuse boundary edges that lie inside another surface: surfaces that touch or
+    overlap without sharing their nodes (the frame field would see a slit there). A
+    boundary edge facing its own surface (a slit, a notch narrower than the probe) is
+    the shape itself."""
     from scipy.spatial import cKDTree
 
     a, b = x[boundary[:, 0]], x[boundary[:, 1]]
@@ -191,7 +278,8 @@ def _check_conforming(source: str, x, cells, boundary) -> None:
             - (tri[:, (i + 1) % 3, 1] - tri[:, i, 1]) * (probe[:, 0] - tri[:, i, 0])
             for i in range(3)
         ]
-        inside |= (d[0] > 0) & (d[1] > 0) & (d[2] > 0)
+        other = cell_surface[near[:, j]] != cell_surface[own_cell]
+        inside |= (d[0] > 0) & (d[1] > 0) & (d[2] > 0) & other
     if inside.any():
         raise GeometryError(
             f"{source!r}: {int(inside.sum())} boundary edges lie inside the domain: surfaces "
@@ -219,25 +307,33 @@ def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
     e^{4iψ} and the interior angle is the angle between the curves' outgoing tangents
     (on the side the mesh says, for reflex corners)."""
     boundary_nodes = np.unique(arrays.boundary)
-    row_of_tag = {int(arrays.gmsh_node[row]): int(row) for row in boundary_nodes}
+    rows_of_tag: dict[int, list[int]] = {}  # a node cut open along a slit has two rows
+    for row in boundary_nodes:
+        rows_of_tag.setdefault(int(arrays.gmsh_node[row]), []).append(int(row))
     psi = np.full(arrays.x.shape[0], np.nan)
     curves = sorted({int(c) for c in arrays.boundary_curve if c != NO_CURVE})
     for curve in curves:
         tags, _, param = gmsh.model.mesh.getNodes(1, curve, includeBoundary=False,
                                                   returnParametricCoord=True)
-        rows = np.array([row_of_tag.get(int(t), -1) for t in tags], dtype=np.int64)
         if not tags.size or param.size != tags.size:
             continue
         d = np.asarray(gmsh.model.getDerivative(1, curve, param)).reshape(-1, 3)
-        ok = (rows >= 0) & (np.hypot(d[:, 0], d[:, 1]) > 0)
-        psi[rows[ok]] = np.arctan2(d[ok, 1], d[ok, 0])
+        for t, (dx, dy, _) in zip(tags, d, strict=True):
+            if math.hypot(dx, dy) > 0:
+                psi[rows_of_tag.get(int(t), [])] = math.atan2(dy, dx)
     corners = []
     curve_set = set(curves)
     for _, point in gmsh.model.getEntities(0):
         tags = gmsh.model.mesh.getNodes(0, point)[0]
-        if tags.size != 1 or int(tags[0]) not in row_of_tag:
+        if tags.size != 1 or int(tags[0]) not in rows_of_tag:
             continue
-        node = row_of_tag[int(tags[0])]
+        rows = rows_of_tag[int(tags[0])]
+        if len(rows) > 1:  # a slit's end on the boundary: each copy its own corner
+            corners += [Corner(float(arrays.x[r, 0]), float(arrays.x[r, 1]),
+                               float(mesh_angle[r])) for r in rows
+                        if round(mesh_angle[r] / (math.pi / 2)) != 2]
+            continue
+        node = rows[0]
         xyz = gmsh.model.getValue(0, point, [])
         outgoing = []
         for curve in gmsh.model.getAdjacencies(0, point)[0]:
@@ -256,6 +352,9 @@ def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
         z = sum(np.exp(4j * math.atan2(ty, tx)) for tx, ty in outgoing)
         if abs(z) > 1e-9 * len(outgoing):
             psi[node] = np.angle(z) / 4
+        if len(outgoing) == 1:  # a slit's tip: the boundary turns back, a full turn
+            corners.append(Corner(float(arrays.x[node, 0]), float(arrays.x[node, 1]),
+                                  float(mesh_angle[node])))
         if len(outgoing) == 2:
             (ax, ay), (bx, by) = outgoing
             theta = math.atan2(abs(ax * by - ay * bx), ax * bx + ay * by)

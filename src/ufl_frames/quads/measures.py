@@ -196,7 +196,8 @@ def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9
     (not inverted, not degenerate, not reflex), and the two quads at an interior edge
     crossing it in opposite directions (consistent orientation; also finds duplicated
     quads); the quads at every vertex one fan (manifold); no point unused, none
-    duplicated; the total area within ``rtol`` of ``area`` when given.
+    duplicated (but for two boundary points: the sides of a slit); the total area within
+    ``rtol`` of ``area`` when given.
     """
     try:
         x, q = _arrays(points, quads)
@@ -246,7 +247,9 @@ def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9
     if unused.size:
         problems.append(f"{unused.size} points are in no quad: "
                         + _some(unused, lambda i: f"point {i}"))
-    problems += _duplicates(x, float(np.ptp(x, axis=0).max()))
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[directed[counts[inverse] == 1].ravel()] = True
+    problems += _duplicates(x, float(np.ptp(x, axis=0).max()), on_boundary)
     if area is not None:
         total = float(area_q.sum())
         if not abs(total - area) <= rtol * abs(area):
@@ -311,12 +314,15 @@ def _non_manifold(q: np.ndarray, n: int) -> list[str]:
             + _some(bad, lambda i: f"point {i} ({per_vertex[i]} fans)")]
 
 
-def _duplicates(x: np.ndarray, scale: float) -> list[str]:
-    """Distinct points at the same place."""
+def _duplicates(x: np.ndarray, scale: float, on_boundary: np.ndarray) -> list[str]:
+    """Distinct points at the same place, but for two boundary points (the two sides of
+    a slit: a mesh cut open along a curve has its points there twice)."""
     from scipy.spatial import cKDTree
 
     pairs = cKDTree(x).query_pairs(GEOMETRIC_TOLERANCE * max(scale, 1e-300),
                                    output_type="ndarray")
+    if len(pairs):
+        pairs = pairs[~(on_boundary[pairs[:, 0]] & on_boundary[pairs[:, 1]])]
     if not len(pairs):
         return []
     return [f"{len(pairs)} pairs of points coincide: "
