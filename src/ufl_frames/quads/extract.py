@@ -27,7 +27,7 @@ decisions are exact integer arithmetic on the fixed-point values: a line's side 
 is the sign of a difference, the order of a line's two ends follows from which way the
 counter-clockwise boundary crosses it, an edge point's parameter t = num/den is a reduced
 pair of integers, and a point's other coordinate is compared with the grid by floor
-division (see :func:`_lines` for the bounds that keep it within int64).
+division (see :func:`_charts` for the bounds that keep it within int64).
 """
 
 from collections import defaultdict
@@ -111,7 +111,7 @@ def fixed_point(grid_map: IntegerGridMap) -> np.ndarray:
 EDGE_ENDS = np.array([[1, 2], [2, 0], [0, 1]])
 
 #: Local fixed-point coordinates below this keep every product of two within int64 (see
-#: :func:`_lines`); a triangle that spans more (some 16000 quads) is done in Python ints.
+#: :func:`_charts`); a triangle that spans more (some 16000 quads) is done in Python ints.
 SMALL = 2**30
 
 
@@ -186,15 +186,79 @@ def _lines(mesh, C):
     """
     x, cells = mesh.x, mesh.cells
     n = x.shape[0]
-    # Each triangle's chart moved by a multiple of UNIT (which keeps every decision) to
-    # 0 <= X < D, D = its span + UNIT. On an edge A -> B crossed by X_c = level:
-    # t = num/den, 0 < num < den <= |B_c − A_c| < D, and the other coordinate
-    # A_o + t (B_o − A_o) = (A_o den + num (B_o − A_o)) / den, a numerator below 2 D²:
-    # within int64 for D <= 2^30; beyond that (a triangle over 16000 quads across) the
-    # numerators are Python integers (object arrays), exact either way.
+    charts = _charts(mesh, C)
+    f, c, level = _integer_lines(charts.X)
+    on, rising, falling = _line_sides(charts.X, f, c, level)
+    # the lines through the inside (not along an edge, nor touching), and those along an edge
+    t = np.flatnonzero(rising.any(axis=1) | falling.any(axis=1))
+    a = np.flatnonzero(on.sum(axis=1) == 2)
+    ft, ct, fa, ca = f[t], c[t], f[a], c[a]
+    met = []  # (edge, num, den, grid) of the edge points met, in order
+    first_t, last_t, owner_t, count_t, grid_u, grid_v = _through_lines(
+        charts, cells, (ft, ct, level[t]), on[t], rising[t], falling[t], met)
+    first_a, last_a, owner_a, count_a, inner_a, edge_a, ascending = _along_lines(
+        charts, cells, (fa, ca), on[a], met)
+
+    # node ids: vertices, then edge points, then inner points
+    edge, num, den, grid, edge_group = _edge_points(met)
+    first_t, last_t, inner_a = (_node_ids(k, n, edge_group) for k in (first_t, last_t, inner_a))
+    inner_first, inner_group = _group(ft[owner_t], grid_u, grid_v)
+    inner_t = n + edge.size + inner_group
+    points_all = np.concatenate([
+        x, _edge_point_positions(x, mesh.edges, edge, num, den),
+        _inner_point_positions(x, cells, charts, ft[owner_t][inner_first],
+                               grid_u[inner_first], grid_v[inner_first])])
+    is_grid = np.concatenate([_vertices_on_grid(n, cells, C), grid,
+                              np.ones(inner_first.size, dtype=bool)])
+
+    # the pieces: consecutive nodes of every line
+    p_t, q_t, line_t = _pieces(first_t, owner_t, inner_t, last_t, count_t)
+    p_a, q_a, line_a = _pieces(first_a, owner_a, inner_a, last_a, count_a)
+    face = np.concatenate([ft[line_t], fa[line_a]])
+    other = 1 - np.concatenate([ct[line_t], ca[line_a]])
+    direction = charts.M[face, :, other]  # physical direction of the other coordinate's increase
+    lo, hi, direction = _distinct_pieces(np.concatenate([p_t, p_a]),
+                                         np.concatenate([q_t, q_a]), face, direction)
+    exterior_p, exterior_q = _exterior_pieces(p_a, q_a, (mesh.faces[edge_a, 1] < 0)[line_a],
+                                              ascending[line_a])
+    return points_all, is_grid, lo, hi, direction, exterior_p, exterior_q
+
+
+@dataclass(frozen=True)
+class _Charts:
+    """Every triangle's chart, for the m triangles of a mesh.
+
+    ``X`` (m, 3, 2) the corners' fixed-point values, moved by a multiple of UNIT (which
+    keeps every decision) to 0 <= X < D; ``wide`` whether some X reaches SMALL (then the
+    crossings' numerators are Python integers); ``edge_id`` (m, 3) the mesh edge of each
+    local edge and ``first_end``, ``second_end`` (m, 3) its local vertices at the smaller
+    and the larger vertex id; ``M`` (m, 2, 2) the affine map, physical = x0 + M (X − X0).
+    """
+
+    X: np.ndarray
+    wide: bool
+    edge_id: np.ndarray
+    first_end: np.ndarray
+    second_end: np.ndarray
+    M: np.ndarray
+
+    def exact(self, a):
+        """``a`` as Python integers (an object array) where the charts are wide, else as is."""
+        return a.astype(object) if self.wide else a
+
+
+def _charts(mesh, C) -> _Charts:
+    """The triangles' charts of ``mesh`` with corners' fixed-point values ``C`` (m, 3, 2).
+
+    Each chart moved to 0 <= X < D, D = its span + UNIT. On an edge A -> B crossed by
+    X_c = level: t = num/den, 0 < num < den <= |B_c − A_c| < D, and the other coordinate
+    A_o + t (B_o − A_o) = (A_o den + num (B_o − A_o)) / den, a numerator below 2 D²: within
+    int64 for D <= 2^30; beyond that (a triangle over 16000 quads across) the numerators
+    are Python integers (object arrays), exact either way.
+    """
+    x, cells = mesh.x, mesh.cells
+    n = x.shape[0]
     X = C - UNIT * (C.min(axis=1) // UNIT)[:, None, :]
-    wide = X.max(initial=0) >= SMALL
-    exact = (lambda a: a.astype(object)) if wide else (lambda a: a)
     # edge ids of the local edges, and the local vertex of each one's smaller end
     edge_vertices = cells[:, EDGE_ENDS]
     keys = mesh.edges[:, 0] * n + mesh.edges[:, 1]
@@ -207,26 +271,41 @@ def _lines(mesh, C):
     dx = np.stack([xf[:, 1] - xf[:, 0], xf[:, 2] - xf[:, 0]], axis=2)
     dp = np.stack([C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]], axis=2).astype(float)
     M = dx @ np.linalg.inv(dp)
+    return _Charts(X=X, wide=bool(X.max(initial=0) >= SMALL), edge_id=edge_id,
+                   first_end=first_end, second_end=second_end, M=M)
 
-    def crossing(f, j, c, level):
-        """Where X_c = level crosses edge j of triangle f inside: the edge, t = num/den
-        reduced, whether it is an integer point, and floor, ceil of the other coordinate
-        in grid steps."""
-        rows = np.arange(f.size)
-        A, B = X[f, first_end[f, j]], X[f, second_end[f, j]]
-        num, den = level - A[rows, c], B[rows, c] - A[rows, c]
-        sign = np.sign(den)
-        num, den = num * sign, den * sign
-        common = np.gcd(num, den)
-        num, den = num // common, den // common
-        o = 1 - c
-        other = exact(A[rows, o]) * den + exact(num) * (B[rows, o] - A[rows, o])
-        step = exact(den) * UNIT
-        low, high = other // step, _ceil_div(other, step)
-        grid = (other % step == 0).astype(bool)
-        return (edge_id[f, j], num, den, grid, low.astype(np.int64), high.astype(np.int64))
 
-    # the integer lines X_c = level through each closed triangle
+def _crossing(charts, f, j, c, level):
+    """Where X_c = level crosses edge j of triangle f inside.
+
+    Args:
+        charts: the triangles' charts.
+        f, j, c, level: per crossing, the triangle, its local edge, the coordinate (0 or 1)
+            and the fixed-point level of the line.
+
+    Returns:
+        The mesh edge, t = num/den reduced (from the edge's smaller vertex), whether the
+        point is an integer point, and floor and ceil of the other coordinate in grid steps.
+    """
+    rows = np.arange(f.size)
+    X = charts.X
+    A, B = X[f, charts.first_end[f, j]], X[f, charts.second_end[f, j]]
+    num, den = level - A[rows, c], B[rows, c] - A[rows, c]
+    sign = np.sign(den)
+    num, den = num * sign, den * sign
+    common = np.gcd(num, den)
+    num, den = num // common, den // common
+    o = 1 - c
+    other = charts.exact(A[rows, o]) * den + charts.exact(num) * (B[rows, o] - A[rows, o])
+    step = charts.exact(den) * UNIT
+    low, high = other // step, _ceil_div(other, step)
+    grid = (other % step == 0).astype(bool)
+    return (charts.edge_id[f, j], num, den, grid, low.astype(np.int64), high.astype(np.int64))
+
+
+def _integer_lines(X):
+    """The integer lines X_c = level through each closed triangle (charts ``X`` (m, 3, 2)):
+    the triangle, the coordinate c and the fixed-point level of each."""
     f, c, level = [], [], []
     for k in (0, 1):
         v = X[:, :, k]
@@ -235,115 +314,245 @@ def _lines(mesh, C):
         f.append(owner)
         c.append(np.full(owner.size, k))
         level.append(value * UNIT)
-    f, c, level = np.concatenate(f), np.concatenate(c), np.concatenate(level)
+    return np.concatenate(f), np.concatenate(c), np.concatenate(level)
+
+
+def _line_sides(X, f, c, level):
+    """How each line (triangle f, coordinate c, level) meets its triangle's boundary.
+
+    Args:
+        X: the charts' corners (m, 3, 2).
+        f, c, level: per line, the triangle, the coordinate and the fixed-point level.
+
+    Returns:
+        ``on`` (L, 3) the vertices on the line; ``rising``, ``falling`` (L, 3) the edges j
+        crossed inside, the counter-clockwise boundary going from below to above the line
+        (rising) or from above to below (falling).
+    """
     side = np.sign(X[f, :, c] - level[:, None])
     on = side == 0
-    # edge j crossed inside, its boundary (counter-clockwise) going from below to above
     rising = (side[:, EDGE_ENDS[:, 0]] < 0) & (side[:, EDGE_ENDS[:, 1]] > 0)
     falling = (side[:, EDGE_ENDS[:, 0]] > 0) & (side[:, EDGE_ENDS[:, 1]] < 0)
-    through = rising.any(axis=1) | falling.any(axis=1)  # not along an edge, nor touching
-    along = on.sum(axis=1) == 2
+    return on, rising, falling
 
-    met = []  # (edge, num, den, grid) of the edge points met, in order
 
-    def meet(edge, num, den, grid):
-        """Placeholder ids −1, −2, ... of edge points, named once all are met."""
-        before = sum(k[0].size for k in met)
-        met.append((edge, num, den, grid))
-        return -1 - (before + np.arange(edge.size))
+def _meet(met, edge, num, den, grid):
+    """Record edge points met, under placeholder ids (named by :func:`_node_ids` once all
+    are met).
 
-    # Lines through the inside: two ends, each an edge point or a vertex. The inside is
-    # left of the counter-clockwise boundary, so where it rises through a U line it is the
-    # line's low end (smaller V), and through a V line its high end (larger U).
-    t = np.flatnonzero(through)
-    ft, ct, lt = f[t], c[t], level[t]
-    ends = []
-    for crossed in (rising, falling):
-        is_edge = crossed[t].any(axis=1)
-        j = np.where(is_edge, crossed[t].argmax(axis=1), on[t].argmax(axis=1))
-        node = cells[ft, j]
-        value = X[ft, j, 1 - ct]
-        low, top = value // UNIT, _ceil_div(value, UNIT)  # of the other coordinate
-        e = np.flatnonzero(is_edge)
-        edge, num, den, grid, low[e], top[e] = crossing(ft[e], j[e], ct[e], lt[e])
-        node[e] = meet(edge, num, den, grid)
-        ends.append((node, low, top))
-    (node_r, low_r, top_r), (node_f, low_f, top_f) = ends
-    high_r = ct == 1  # the rising end is the high one
-    first_node = np.where(high_r, node_f, node_r)
-    last_node = np.where(high_r, node_r, node_f)
+    Args:
+        met: the edge points met so far, a list of (edge, num, den, grid); appended to.
+        edge, num, den, grid: the new points' mesh edge, t = num/den, and whether each is
+            an integer point (as :func:`_crossing` gives them).
+
+    Returns:
+        Their placeholder ids: −1 − i for the i-th point met in all.
+    """
+    before = sum(k[0].size for k in met)
+    met.append((edge, num, den, grid))
+    return -1 - (before + np.arange(edge.size))
+
+
+def _line_end(charts, cells, lines, crossed, on, met):
+    """One end of every line through the inside: the edge point where the boundary crosses
+    it the way ``crossed`` gives, or else the vertex on it.
+
+    Args:
+        charts: the triangles' charts.
+        cells: the mesh's triangles (m, 3).
+        lines: per line, (triangle, coordinate, fixed-point level).
+        crossed: (L, 3) the edges crossed inside in the direction of this end.
+        on: (L, 3) the vertices on the line.
+        met: the edge points met so far; this end's are appended (see :func:`_meet`).
+
+    Returns:
+        The end's node (a vertex id, or an edge point's placeholder id), and floor and
+        ceil of the other coordinate there, in grid steps.
+    """
+    f, c, level = lines
+    is_edge = crossed.any(axis=1)
+    j = np.where(is_edge, crossed.argmax(axis=1), on.argmax(axis=1))
+    node = cells[f, j]
+    value = charts.X[f, j, 1 - c]
+    low, top = value // UNIT, _ceil_div(value, UNIT)  # of the other coordinate
+    e = np.flatnonzero(is_edge)
+    edge, num, den, grid, low[e], top[e] = _crossing(charts, f[e], j[e], c[e], level[e])
+    node[e] = _meet(met, edge, num, den, grid)
+    return node, low, top
+
+
+def _through_lines(charts, cells, lines, on, rising, falling, met):
+    """Lines through the inside: two ends, each an edge point or a vertex, and the integer
+    points between them. The inside is left of the counter-clockwise boundary, so where it
+    rises through a U line it is the line's low end (smaller V), and through a V line its
+    high end (larger U).
+
+    Args:
+        charts: the triangles' charts.
+        cells: the mesh's triangles (m, 3).
+        lines: per line, (triangle, coordinate, fixed-point level).
+        on, rising, falling: (L, 3) as :func:`_line_sides` gives them.
+        met: the edge points met so far; the ends' are appended (see :func:`_meet`).
+
+    Returns:
+        ``first``, ``last`` the end nodes (low, high) of every line; ``owner`` the line of
+        every inner integer point, in order along it; ``count`` the inner points of every
+        line; ``grid_u``, ``grid_v`` the inner points' integer coordinates.
+    """
+    c, level = lines[1], lines[2]
+    node_r, low_r, top_r = _line_end(charts, cells, lines, rising, on, met)
+    node_f, low_f, top_f = _line_end(charts, cells, lines, falling, on, met)
+    high_r = c == 1  # the rising end is the high one
+    first = np.where(high_r, node_f, node_r)
+    last = np.where(high_r, node_r, node_f)
     floor_first = np.where(high_r, low_f, low_r)
     ceil_last = np.where(high_r, top_r, top_f)
-    inner_count = np.maximum(ceil_last - floor_first - 1, 0)
-    owner, step = _ranges(floor_first + 1, inner_count)
-    grid_u = np.where(ct[owner] == 0, lt[owner] // UNIT, step)
-    grid_v = np.where(ct[owner] == 0, step, lt[owner] // UNIT)
-    inner_first, inner_group = _group(ft[owner], grid_u, grid_v)
+    count = np.maximum(ceil_last - floor_first - 1, 0)
+    owner, step = _ranges(floor_first + 1, count)
+    grid_u = np.where(c[owner] == 0, level[owner] // UNIT, step)
+    grid_v = np.where(c[owner] == 0, step, level[owner] // UNIT)
+    return first, last, owner, count, grid_u, grid_v
 
-    # Lines along an edge: its two vertices and the edge points between them (where the
-    # lines of the other coordinate cross), in the order of the other coordinate.
-    a = np.flatnonzero(along)
-    fa, ca = f[a], c[a]
-    ja = (~on[a]).argmax(axis=1)  # the edge opposite the one vertex off the line
+
+def _along_lines(charts, cells, lines, on, met):
+    """Lines along an edge: its two vertices and the edge points between them (where the
+    lines of the other coordinate cross), in the order of the other coordinate.
+
+    Args:
+        charts: the triangles' charts.
+        cells: the mesh's triangles (m, 3).
+        lines: per line, (triangle, coordinate).
+        on: (L, 3) the vertices on the line (two of them).
+        met: the edge points met so far; the lines' are appended (see :func:`_meet`).
+
+    Returns:
+        ``first``, ``last`` the end vertices (low, high); ``owner`` the line of every edge
+        point between them, in order; ``count`` the edge points of every line; ``inner``
+        their placeholder ids; ``edge`` the mesh edge of every line; ``ascending`` whether
+        the line runs with its triangle's counter-clockwise edge.
+    """
+    fa, ca = lines
+    ja = (~on).argmax(axis=1)  # the edge opposite the one vertex off the line
     v_start, v_end = EDGE_ENDS[ja, 0], EDGE_ENDS[ja, 1]
-    w_start, w_end = X[fa, v_start, 1 - ca], X[fa, v_end, 1 - ca]
+    w_start, w_end = charts.X[fa, v_start, 1 - ca], charts.X[fa, v_end, 1 - ca]
     ascending = w_start < w_end
     w_low, w_high = np.minimum(w_start, w_end), np.maximum(w_start, w_end)
-    along_first = cells[fa, np.where(ascending, v_start, v_end)]
-    along_last = cells[fa, np.where(ascending, v_end, v_start)]
-    along_count = np.maximum(_ceil_div(w_high, UNIT) - w_low // UNIT - 1, 0)
-    along_owner, crossed_at = _ranges(w_low // UNIT + 1, along_count)
-    edge, num, den, grid, _, _ = crossing(fa[along_owner], ja[along_owner],
-                                          1 - ca[along_owner], crossed_at * UNIT)
-    along_inner = meet(edge, num, den, grid)
+    first = cells[fa, np.where(ascending, v_start, v_end)]
+    last = cells[fa, np.where(ascending, v_end, v_start)]
+    count = np.maximum(_ceil_div(w_high, UNIT) - w_low // UNIT - 1, 0)
+    owner, crossed_at = _ranges(w_low // UNIT + 1, count)
+    edge, num, den, grid, _, _ = _crossing(charts, fa[owner], ja[owner], 1 - ca[owner],
+                                           crossed_at * UNIT)
+    inner = _meet(met, edge, num, den, grid)
+    return first, last, owner, count, inner, charts.edge_id[fa, ja], ascending
 
-    # node ids: vertices, then edge points, then inner points
+
+def _edge_points(met):
+    """The distinct edge points among those ``met`` (equal edge and t): the edge, num, den
+    and whether an integer point of each, and the point of every one met."""
     edge, num, den, grid = (np.concatenate(k) for k in zip(*met, strict=True))
     edge_first, edge_group = _group(edge, num, den)
-    n_edge = edge_first.size
-    def node_ids(k):  # edge point −1 − i is node n + its group; vertices keep their id
-        ids, points = k.copy(), k < 0  # (np.where would index edge_group with every k)
-        ids[points] = n + edge_group[-1 - k[points]]
-        return ids
+    return edge[edge_first], num[edge_first], den[edge_first], grid[edge_first], edge_group
 
-    first_node, last_node, along_inner = (node_ids(k)
-                                          for k in (first_node, last_node, along_inner))
-    e, ta = edge[edge_first], num[edge_first] / den[edge_first]
-    va, vb = mesh.edges[e, 0], mesh.edges[e, 1]
-    edge_points = x[va] + ta[:, None] * (x[vb] - x[va])
-    fo = ft[owner][inner_first]
-    offset = (np.stack([grid_u[inner_first], grid_v[inner_first]], axis=1) * UNIT
-              - X[fo, 0]).astype(float)
-    inner_points = x[cells[fo, 0]] + (M[fo] @ offset[:, :, None])[:, :, 0]
-    inner_ids = n + n_edge + inner_group
 
+def _node_ids(k, n, edge_group):
+    """The node ids of nodes named by vertex or placeholder.
+
+    Args:
+        k: vertex ids (>= 0) and edge points' placeholder ids (−1 − i, see :func:`_meet`).
+        n: the number of vertices.
+        edge_group: the distinct edge point of every edge point met.
+
+    Returns:
+        The ids: a vertex keeps its id, edge point −1 − i is node n + edge_group[i].
+    """
+    ids, points = k.copy(), k < 0  # (np.where would index edge_group with every k)
+    ids[points] = n + edge_group[-1 - k[points]]
+    return ids
+
+
+def _edge_point_positions(x, edges, e, num, den):
+    """Physical positions of points on mesh edges.
+
+    Args:
+        x: the mesh's vertices (n, 2).
+        edges: the mesh's edges (E, 2), smaller vertex first.
+        e, num, den: per point, its edge and t = num/den from the edge's smaller vertex.
+
+    Returns:
+        The positions (k, 2).
+    """
+    ta = num / den
+    va, vb = edges[e, 0], edges[e, 1]
+    return x[va] + ta[:, None] * (x[vb] - x[va])
+
+
+def _inner_point_positions(x, cells, charts, face, grid_u, grid_v):
+    """Physical positions of the integer points (grid_u, grid_v) inside triangles ``face``.
+
+    Args:
+        x: the mesh's vertices (n, 2).
+        cells: the mesh's triangles (m, 3).
+        charts: the triangles' charts.
+        face, grid_u, grid_v: per point, the triangle and the integer coordinates.
+
+    Returns:
+        The positions (k, 2), by the triangles' affine maps.
+    """
+    offset = (np.stack([grid_u, grid_v], axis=1) * UNIT - charts.X[face, 0]).astype(float)
+    return x[cells[face, 0]] + (charts.M[face] @ offset[:, :, None])[:, :, 0]
+
+
+def _vertices_on_grid(n, cells, C):
+    """Which vertices are integer points.
+
+    Args:
+        n: the number of vertices.
+        cells: the mesh's triangles (m, 3).
+        C: (m, 3, 2) the corners' fixed-point values.
+
+    Returns:
+        (n,) bool, True at the vertices whose values are integer points.
+    """
     vertex_grid = np.zeros(n, dtype=bool)
     vertex_grid[cells] = (C % UNIT == 0).all(axis=2)
-    points_all = np.concatenate([x, edge_points, inner_points])
-    is_grid = np.concatenate([vertex_grid, grid[edge_first],
-                              np.ones(inner_first.size, dtype=bool)])
+    return vertex_grid
 
-    # the pieces: consecutive nodes of every line
-    p_t, q_t, line_t = _pieces(first_node, owner, inner_ids, last_node, inner_count)
-    p_a, q_a, line_a = _pieces(along_first, along_owner, along_inner, along_last, along_count)
-    p, q = np.concatenate([p_t, p_a]), np.concatenate([q_t, q_a])
-    face = np.concatenate([ft[line_t], fa[line_a]])
-    other = 1 - np.concatenate([ct[line_t], ca[line_a]])
-    direction = M[face, :, other]  # physical direction of the other coordinate's increase
-    # pieces along the boundary: the domain is left of the counter-clockwise edge
-    boundary = mesh.faces[edge_id[fa, ja], 1] < 0
-    mark = boundary[line_a]
-    up = ascending[line_a][mark]
-    exterior_p = np.where(up, q_a[mark], p_a[mark])
-    exterior_q = np.where(up, p_a[mark], q_a[mark])
-    # one piece per node pair, its direction from the first triangle that has it
+
+def _distinct_pieces(p, q, face, direction):
+    """One piece per node pair, its direction from the first triangle that has it.
+
+    Args:
+        p, q: the pieces' nodes, from p to q.
+        face: the triangle of every piece.
+        direction: (S, 2) the physical direction of every piece from p to q.
+
+    Returns:
+        The node pairs lo < hi and the direction (S', 2) from lo to hi.
+    """
     order = np.argsort(face, kind="stable")
     p, q, direction = p[order], q[order], direction[order]
     lo, hi = np.minimum(p, q), np.maximum(p, q)
     direction = np.where((p < q)[:, None], direction, -direction)
     first, _ = _group(lo, hi)
-    return (points_all, is_grid, lo[first], hi[first], direction[first],
-            exterior_p, exterior_q)
+    return lo[first], hi[first], direction[first]
+
+
+def _exterior_pieces(p, q, boundary, ascending):
+    """The boundary pieces, directed so that the outside is on their left (the domain is
+    left of the counter-clockwise edge).
+
+    Args:
+        p, q: the pieces of the lines along an edge, p before q along the line.
+        boundary: whether each piece's edge is a boundary edge.
+        ascending: whether each piece's line runs with its triangle's counter-clockwise
+            edge (then the edge runs from p to q).
+
+    Returns:
+        The boundary pieces' two nodes, the outside on the left of the first to the second.
+    """
+    up = ascending[boundary]
+    return np.where(up, q[boundary], p[boundary]), np.where(up, p[boundary], q[boundary])
 
 
 def _pieces(first, owner, inner, last, count):
@@ -364,18 +573,60 @@ def _pieces(first, owner, inner, last, count):
 def _faces(points_all, is_grid, lo, hi, direction, exterior_p, exterior_q) -> QuadMesh:
     """Chains between integer points, their cyclic order, the faces; the quads.
 
-    The pieces lo[s] -> hi[s] are directed half-pieces 2 s, back 2 s + 1."""
+    The pieces lo[s] -> hi[s] are directed half-pieces 2 s, back 2 s + 1.
+
+    Args:
+        points_all, is_grid, lo, hi, direction, exterior_p, exterior_q: the nodes and the
+            pieces as :func:`_lines` returns them.
+
+    Returns:
+        The quad mesh.
+
+    Raises:
+        ExtractionError: where the pieces do not bound quads only.
+    """
     n = points_all.shape[0]
     tail = np.stack([lo, hi], axis=1).ravel()
     head = np.stack([hi, lo], axis=1).ravel()
     heading = np.stack([direction, -direction], axis=1).reshape(-1, 2)
     degree = np.bincount(tail, minlength=n)
+    onward = _onward(tail, head, degree, is_grid)
+    start = np.flatnonzero(is_grid[tail])
+    chain_of, piece_of, last = _trace_chains(onward, start)
+    grid_ids = np.flatnonzero(is_grid & (degree > 0))
+    number = np.full(n, -1, dtype=np.int64)
+    number[grid_ids] = np.arange(grid_ids.size)
+    begin, finish = number[tail[start]], number[head[last]]
+    turn = _next_chains(heading, start, last, begin, grid_ids.size)
+    face = _cycles(turn)
+    outside = _outside(lo, hi, n, exterior_p, exterior_q)
+    quads = _quads(face, turn, begin, chain_of, outside[piece_of],
+                   points_all[tail[piece_of]], points_all[head[piece_of]])
+    chains = _polylines(points_all, begin, finish, chain_of,
+                        tail[start], head[piece_of])
+    return QuadMesh(points=points_all[grid_ids], quads=quads, chains=chains,
+                    boundary=_boundary_edges(quads, grid_ids.size))
+
+
+def _onward(tail, head, degree, is_grid):
+    """Into a point where a line crosses an edge: on along the other half-piece leaving it.
+
+    Args:
+        tail, head: the half-pieces' nodes.
+        degree: the half-pieces leaving every node.
+        is_grid: which nodes are integer points.
+
+    Returns:
+        The half-piece after every half-piece (−1 into an integer point or a dead end).
+
+    Raises:
+        ExtractionError: where such a point is not on exactly one line.
+    """
     through = (degree > 0) & ~is_grid
     bad = int(np.count_nonzero(through & (degree != 2)))
     if bad:
         raise ExtractionError(f"{bad} points where an iso-line crosses an edge are not "
                               "on exactly one line (the map folds or the grid is broken)")
-    # into a point where a line crosses an edge: on along the other half-piece leaving it
     leaving = np.argsort(tail, kind="stable")
     first_leaving = np.cumsum(degree) - degree
     onward = np.full(tail.size, -1)
@@ -383,8 +634,14 @@ def _faces(points_all, is_grid, lo, hi, direction, exterior_p, exterior_q) -> Qu
     one = leaving[first_leaving[head[enter]]]
     two = leaving[first_leaving[head[enter]] + 1]
     onward[enter] = np.where(one == (enter ^ 1), two, one)
-    # chains: from each integer point, along each half-piece, to the next integer point
-    start = np.flatnonzero(is_grid[tail])
+    return onward
+
+
+def _trace_chains(onward, start):
+    """Chains: from each integer point, along each half-piece ``start``, to the next
+    integer point (all chains a step at a time). Returns the chain of every half-piece on
+    a chain and the half-piece, sorted by chain and in order along it, and the last
+    half-piece of every chain."""
     chain_of, piece_of = [np.arange(start.size)], [start]
     last = start.copy()
     active, current = np.arange(start.size), start
@@ -397,51 +654,97 @@ def _faces(points_all, is_grid, lo, hi, direction, exterior_p, exterior_q) -> Qu
         last[active] = current
         chain_of.append(active)
         piece_of.append(current)
-        if len(chain_of) > tail.size + 1:
+        if len(chain_of) > onward.size + 1:
             raise ExtractionError("an iso-line closes on itself without an integer "
                                   "point")
     chain_of, piece_of = np.concatenate(chain_of), np.concatenate(piece_of)
     along = np.argsort(chain_of, kind="stable")  # by chain, in order along it
-    chain_of, piece_of = chain_of[along], piece_of[along]
-    grid_ids = np.flatnonzero(is_grid & (degree > 0))
-    number = np.full(n, -1, dtype=np.int64)
-    number[grid_ids] = np.arange(grid_ids.size)
-    begin, finish = number[tail[start]], number[head[last]]
-    # around every integer point its chains counter-clockwise
+    return chain_of[along], piece_of[along], last
+
+
+def _next_chains(heading, start, last, begin, points):
+    """The next chain of every chain's face (the face on its left): around every integer
+    point its chains counter-clockwise; the twin runs the same path back; the next is the
+    one clockwise of the twin at the end point.
+
+    Args:
+        heading: (H, 2) the physical direction of every half-piece.
+        start, last: the first and the last half-piece of every chain.
+        begin: the integer point each chain leaves (numbered 0 .. points − 1).
+        points: the number of integer points.
+
+    Returns:
+        The next chain of every chain.
+    """
     angle = np.arctan2(heading[start, 1], heading[start, 0])
     around = np.lexsort((np.arange(start.size), angle, begin))
-    count = np.bincount(begin, minlength=grid_ids.size)
+    count = np.bincount(begin, minlength=points)
     offset = np.cumsum(count) - count
     rank = np.empty(start.size, dtype=np.int64)
     rank[around] = np.arange(start.size) - offset[begin[around]]
-    # the twin runs the same path back; the next chain of a face: the one clockwise of
-    # the twin at the end point (the face on the left)
-    chain_from = np.full(tail.size, -1)
+    chain_from = np.full(heading.shape[0], -1)
     chain_from[start] = np.arange(start.size)
     twin = chain_from[last ^ 1]
     at = begin[twin]
-    turn = around[offset[at] + (rank[twin] - 1) % count[at]]
-    # faces: the cycles of turn, each named by its smallest chain
-    face = np.arange(start.size)
+    return around[offset[at] + (rank[twin] - 1) % count[at]]
+
+
+def _cycles(turn):
+    """The cycles of the permutation ``turn``, each named by its smallest member (by
+    pointer jumping): the cycle of every member."""
+    face = np.arange(turn.size)
     jump = turn
     while True:
         merged = np.minimum(face, face[jump])
         if np.array_equal(merged, face):
             break
         face, jump = merged, jump[jump]
-    # boundary loops: a piece with the outside on its left
-    outside = np.zeros(tail.size, dtype=bool)
+    return face
+
+
+def _outside(lo, hi, n, exterior_p, exterior_q):
+    """Which half-pieces have the outside on their left.
+
+    Args:
+        lo, hi: the pieces, half-pieces 2 s along lo[s] -> hi[s] and 2 s + 1 back.
+        n: the number of nodes.
+        exterior_p, exterior_q: the boundary pieces, the outside on their left.
+
+    Returns:
+        (2 S,) bool over the half-pieces.
+    """
+    outside = np.zeros(2 * lo.size, dtype=bool)
     keys = lo * n + hi
     p, q = exterior_p, exterior_q
     s = np.searchsorted(keys, np.minimum(p, q) * n + np.maximum(p, q))
     outside[2 * s + (p > q)] = True
+    return outside
+
+
+def _quads(face, turn, begin, chain_of, outside, a, b):
+    """The quads: the faces that are not boundary loops, each corner an integer point.
+
+    Args:
+        face: the face of every chain (named by its smallest chain).
+        turn: the next chain of every chain along its face.
+        begin: the integer point every chain leaves.
+        chain_of: the chain of every half-piece on a chain.
+        outside: for every such half-piece, whether the outside is on its left.
+        a, b: (k, 2) the positions of every such half-piece's tail and head.
+
+    Returns:
+        The quads (q, 4), counter-clockwise.
+
+    Raises:
+        ExtractionError: where a bounded face is not a positive quad.
+    """
+    total = face.size
     pieces_face = face[chain_of]
-    loop = np.bincount(pieces_face, weights=outside[piece_of], minlength=start.size) > 0
-    a, b = points_all[tail[piece_of]], points_all[head[piece_of]]
+    loop = np.bincount(pieces_face, weights=outside, minlength=total) > 0
     area = 0.5 * np.bincount(pieces_face, weights=a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1],
-                             minlength=start.size)
-    sides = np.bincount(face, minlength=start.size)
-    named = np.flatnonzero((face == np.arange(start.size)) & ~loop)
+                             minlength=total)
+    sides = np.bincount(face, minlength=total)
+    named = np.flatnonzero((face == np.arange(total)) & ~loop)
     is_quad = (sides[named] == 4) & (area[named] > 0)
     other_faces = int(np.count_nonzero(~is_quad))
     if other_faces:
@@ -451,24 +754,39 @@ def _faces(points_all, is_grid, lo, hi, direction, exterior_p, exterior_q) -> Qu
     for _ in range(4):
         quads.append(begin[corner])
         corner = turn[corner]
-    quads = np.stack(quads, axis=1).reshape(-1, 4)
-    # the chains (for pictures) by their sorted point pair, each from its lower point
+    return np.stack(quads, axis=1).reshape(-1, 4)
+
+
+def _polylines(points_all, begin, finish, chain_of, first, heads):
+    """The chains (for pictures) by their sorted point pair, each from its lower point.
+
+    Args:
+        points_all: the nodes' positions.
+        begin, finish: the integer points every chain leaves and reaches.
+        chain_of: the chain of every half-piece on a chain (sorted).
+        first: the first node of every chain.
+        heads: the head node of every half-piece on a chain.
+
+    Returns:
+        ``{(i, j): polyline (k, 2)}`` for the chains with i < j.
+    """
+    total = begin.size
     kept = np.flatnonzero(begin < finish)
-    sizes = np.bincount(chain_of, minlength=start.size)[kept] + 1
-    path = _chain_points(tail[start], chain_of, head[piece_of], kept, start.size)
-    ring = points_all[path]
+    sizes = np.bincount(chain_of, minlength=total)[kept] + 1
+    ring = points_all[_chain_points(first, chain_of, heads, kept, total)]
     bounds = np.cumsum(sizes).tolist()
     polylines = [ring[b - k:b] for b, k in zip(bounds, sizes.tolist(), strict=True)]
-    chains = dict(zip(zip(begin[kept].tolist(), finish[kept].tolist(), strict=True),
-                      polylines, strict=True))
-    # boundary edges: those of one quad only
+    return dict(zip(zip(begin[kept].tolist(), finish[kept].tolist(), strict=True),
+                    polylines, strict=True))
+
+
+def _boundary_edges(quads, points):
+    """The boundary edges (b, 2) of ``quads`` on ``points`` points: those of one quad only."""
     a, b = quads.ravel(), np.roll(quads, -1, axis=1).ravel()
-    pairs, counts = np.unique(np.minimum(a, b) * grid_ids.size + np.maximum(a, b),
+    pairs, counts = np.unique(np.minimum(a, b) * points + np.maximum(a, b),
                               return_counts=True)
     once = pairs[counts == 1]
-    boundary = np.stack([once // grid_ids.size, once % grid_ids.size], axis=1)
-    return QuadMesh(points=points_all[grid_ids], quads=quads, chains=chains,
-                    boundary=boundary.reshape(-1, 2))
+    return np.stack([once // points, once % points], axis=1).reshape(-1, 2)
 
 
 def _chain_points(first, chain_of, heads, kept, total):
