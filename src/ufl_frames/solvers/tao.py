@@ -70,14 +70,13 @@ from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.problem import FrameProblem  # noqa: E402
 from ufl_frames.petsc_options import HESSIANS, TAO_TYPES  # noqa: E402
+from ufl_frames.solvers.active_set import CONSISTENT_ROUNDS, RELEASE_RATIO  # noqa: E402
 from ufl_frames.solvers.hessian import (  # noqa: E402
-    CONSISTENT_ROUNDS,
     DEFAULT_DAMPING,
     HYBRID_SWITCH,
-    RELEASE_RATIO,
     GaussNewtonModel,
-    ReducedFactorPC,
 )
+from ufl_frames.solvers.reduced_pc import ReducedFactorPC  # noqa: E402
 
 #: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
 #: ``-tao_fmin`` are not here: their defaults depend on the problem (see :func:`solve`).
@@ -192,7 +191,7 @@ MUMPS_BLR_TOLERANCE = 1e-8
 def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
     """The default preconditioner of the Newton systems of ``tao_type``: the sparse
     Cholesky factorisation of the model's assembled part in reduced tangent coordinates
-    (:class:`~ufl_frames.solvers.hessian.ReducedFactorPC`: 3 unknowns per vertex instead
+    (:class:`~ufl_frames.solvers.reduced_pc.ReducedFactorPC`: 3 unknowns per vertex instead
     of 5); with ``reduced=False``, of the 5N × 5N pre-matrix itself (MUMPS where PETSc has
     it, which runs in parallel; PETSc's own in serial; GAMG as the last resort).
 
@@ -207,7 +206,7 @@ def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
         return {}
     if reduced:
         options = {f"{prefix}pc_type": "python",
-                   f"{prefix}pc_python_type": "ufl_frames.solvers.hessian.ReducedFactorPC"}
+                   f"{prefix}pc_python_type": "ufl_frames.solvers.reduced_pc.ReducedFactorPC"}
         if PETSc.Sys.hasExternalPackage("mumps"):
             # MUMPS's block low-rank factorisation at a 1e-8 threshold: the same steps
             # and Krylov counts; at 10⁶ triangles on 2 ranks 12.6 s a factorisation
