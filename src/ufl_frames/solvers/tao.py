@@ -377,8 +377,8 @@ def solve(
     options.setdefault("tao_gatol", gttol * scale)
     options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
-        return _solve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
-                      coarse_energy)
+        return _TaoSolve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
+                         coarse_energy).run()
 
 
 def tao_callbacks(problem: FrameProblem):
@@ -425,60 +425,94 @@ def _released(exc: BaseException) -> BaseException:
     return exc
 
 
-def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
-           resume=None, coarse_energy=None) -> SolveResult:
-    """TAO from ``problem.q``, with the options already in the database (see :func:`solve`).
+class _TaoSolve:
+    """One TAO solve of :func:`solve` from ``problem.q``, with the options already in the
+    database: TAO's callbacks and the state they share (the history, the Krylov count,
+    the first exception), the Newton model, and the solve itself (:meth:`run`).
 
-    Every PETSc object made here (x, g, the model, the TAO) is destroyed on the way out,
-    whether the solve returns or raises, in the same order on every rank (collective).
-    An exception raised by a callback (``monitor`` included) reaches PETSc as an error that
-    aborts ``TaoSolve``; petsc4py then raises a ``PETSc.Error`` (code 101) in its place, so
-    the callbacks keep the first one and it is that exception the caller sees.
+    Every PETSc object :meth:`run` makes (x, g, the model, the TAO) is destroyed on the
+    way out, whether the solve returns or raises, in the same order on every rank
+    (collective). An exception raised by a callback (``monitor`` included) reaches PETSc
+    as an error that aborts ``TaoSolve``; petsc4py then raises a ``PETSc.Error`` (code 101)
+    in its place, so the callbacks keep the first one and it is that exception the caller
+    sees.
+
+    Args:
+        problem: the frame problem; ``problem.q`` is the start and holds the result.
+        tao_type: the TAO type the options give.
+        options_prefix: the prefix of the TAO's options.
+        monitor: called with each history entry (None: none).
+        checkpoint: called with the :class:`SolverState` at each accepted iterate.
+        resume: the state to go on from (None: a new solve).
+        coarse_energy: the coarser level's H (finest level of nested iteration).
     """
-    comm = problem.constraints.comm
-    hessian = None
-    if tao_type in SECOND_ORDER_TYPES:
-        opts = PETSc.Options(options_prefix)
-        hessian = opts.getString("frames_hessian",
-                                 "exact" if problem.constraints.isotropic else "hybrid")
-        if hessian not in HESSIANS:
-            raise ValueError(f"-frames_hessian must be one of {', '.join(HESSIANS)}, "
-                             f"got {hessian!r}")
 
-    errors = []  # the first exception raised inside a callback, re-raised after TAO stops
+    def __init__(self, problem: FrameProblem, tao_type: str, options_prefix: str, monitor,
+                 checkpoint=None, resume: SolverState | None = None,
+                 coarse_energy: float | None = None):
+        self.problem, self.tao_type, self.options_prefix = problem, tao_type, options_prefix
+        self.monitor, self.checkpoint, self.resume = monitor, checkpoint, resume
+        self.coarse_energy = coarse_energy
+        self.comm = problem.constraints.comm
+        self.hessian = None
+        if tao_type in SECOND_ORDER_TYPES:
+            opts = PETSc.Options(options_prefix)
+            self.hessian = opts.getString("frames_hessian",
+                                          "exact" if problem.constraints.isotropic
+                                          else "hybrid")
+            if self.hessian not in HESSIANS:
+                raise ValueError(f"-frames_hessian must be one of {', '.join(HESSIANS)}, "
+                                 f"got {self.hessian!r}")
 
-    def keep(exc: BaseException) -> None:
-        if not errors:
-            errors.append(exc)
+        self.errors = []  # the first exception raised inside a callback, re-raised after TAO
+        self.callbacks = tao_callbacks(problem)  # objective, objective_gradient, update
 
-    def guarded(callback):
+        self.history = [] if resume is None else [dict(entry) for entry in resume.history]
+        # Krylov iterations so far, and at the last history entry
+        self.linear_iterations = [0, 0]
+        self.skip_first = resume is not None  # TAO's first report is the resumed iterate again
+        self.earlier = 0.0 if resume is None else resume.wall_time_s
+
+        self.tao_base = 0 if resume is None else resume.tao_iterations
+        self.stopped_on_h = False  # whether the test on H (H_RTOL) ended the solve
+        self.h_rtol = PETSc.Options(options_prefix).getReal("frames_h_rtol", H_RTOL)
+        self.nested_rtol = PETSc.Options(options_prefix).getReal("frames_nested_rtol",
+                                                                 NESTED_RTOL)
+        self.gnorm0 = None  # what TAO's relative gradient test divides by
+        self.model = None  # the Newton model (second-order types), made by run()
+        self.start = None  # when TAO's solve started
+
+    def keep(self, exc: BaseException) -> None:
+        """Keep ``exc`` where it is the first exception of a callback."""
+        if not self.errors:
+            self.errors.append(exc)
+
+    def guarded(self, callback):
+        """``callback`` keeping the exceptions it raises (:meth:`keep`) before PETSc sees
+        them."""
         def call(*args):
             try:
                 return callback(*args)
             except BaseException as exc:
-                keep(exc)
+                self.keep(exc)
                 raise
 
         return call
 
-    objective, objective_gradient, update = tao_callbacks(problem)
-
-    history = [] if resume is None else [dict(entry) for entry in resume.history]
-    linear_iterations = [0, 0]  # Krylov iterations so far, and at the last history entry
-    skip_first = resume is not None  # TAO's first report is the resumed iterate again
-    earlier = 0.0 if resume is None else resume.wall_time_s
-
-    def count_linear(ksp, it, rnorm):
+    def count_linear(self, ksp, it, rnorm):
+        """KSP monitor: counts the Krylov iterations."""
         if it > 0:
-            linear_iterations[0] += 1
+            self.linear_iterations[0] += 1
 
-    def record(tao):
-        nonlocal skip_first
+    def record(self, tao):
+        """TAO monitor: a history entry for each new iterate, then ``checkpoint`` and
+        ``monitor``, and the stopping test on H."""
+        resume, model, history = self.resume, self.model, self.history
         _, f, gnorm, _, step, _ = tao.getSolutionStatus()
         if resume is None and tao.getIterationNumber() == 0:
-            gnorm0[0] = float(gnorm)  # TAO's |g₀|: its last report numbered 0 (see SolveResult)
-        if skip_first:
-            skip_first = False
+            self.gnorm0 = float(gnorm)  # TAO's |g₀|: its last report numbered 0 (see SolveResult)
+        if self.skip_first:
+            self.skip_first = False
             return
         if history and (f, gnorm) == (history[-1]["H"], history[-1]["gnorm"]):
             return  # a rejected trust-region step (ntr monitors those too): x did not move
@@ -487,31 +521,36 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             # This TAO numbers its first step 0 again (bncg does, see SolveResult): it
             # would allow one step more than the iterations left.
             tao.setMaximumIterations(max(tao.getMaximumIterations() - 1, 0))
+        problem = self.problem
         problem.set_from_x(tao.getSolution())
         entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
                  "gnorm": float(gnorm), "step": float(step)}
         if model is not None:  # Krylov iterations of the Newton step(s) that led here
-            entry["ksp_its"] = linear_iterations[0] - linear_iterations[1]
-            linear_iterations[1] = linear_iterations[0]
+            entry["ksp_its"] = self.linear_iterations[0] - self.linear_iterations[1]
+            self.linear_iterations[1] = self.linear_iterations[0]
             # faces factorised for it: one, or one per round of the consistent rule
             entry["factorisations"] = max(len(model.bound_rounds), 1)
         history.append(entry)
-        if checkpoint is not None:
-            checkpoint(snapshot(tao, float(step)))
-        if monitor is not None:
-            monitor(entry)
+        if self.checkpoint is not None:
+            self.checkpoint(self.snapshot(tao, float(step)))
+        if self.monitor is not None:
+            self.monitor(entry)
         if model is not None and gnorm > tao.getTolerances()[0] and _h_converged(
-                history, h_rtol, coarse_energy=coarse_energy, nested_rtol=nested_rtol):
+                history, self.h_rtol, coarse_energy=self.coarse_energy,
+                nested_rtol=self.nested_rtol):
             # TAO tests its own criteria after the monitor and keeps a reason set here
-            stopped_on_h[0] = True
+            self.stopped_on_h = True
             tao.setConvergedReason(PETSc.TAO.ConvergedReason.CONVERGED_USER)
 
-    def snapshot(tao, step) -> SolverState:
-        wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    def snapshot(self, tao, step) -> SolverState:
+        """The :class:`SolverState` at TAO's current iterate (collective)."""
+        problem, model = self.problem, self.model
+        wall = self.comm.allreduce(time.perf_counter() - self.start, op=MPI.MAX)
         state = SolverState(
-            rows=problem.rows[: problem.owned].copy(), history=[dict(e) for e in history],
-            tao_iterations=tao_base + tao.getIterationNumber(), tao_gnorm0=tao_gnorm0(),
-            wall_time_s=earlier + wall, step=step)
+            rows=problem.rows[: problem.owned].copy(),
+            history=[dict(e) for e in self.history],
+            tao_iterations=self.tao_base + tao.getIterationNumber(),
+            tao_gnorm0=self.tao_gnorm0(), wall_time_s=self.earlier + wall, step=step)
         if model is not None:
             state.adaptation, state.model_gnorm0 = model.adaptation, model.gnorm0
             state.exact_hessian = model.exact
@@ -521,17 +560,13 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             state.released = None if model.released is None else model.released.copy()
         return state
 
-    tao_base = 0 if resume is None else resume.tao_iterations
-    stopped_on_h = [False]  # whether the test on H (H_RTOL) ended the solve
-    h_rtol = PETSc.Options(options_prefix).getReal("frames_h_rtol", H_RTOL)
-    nested_rtol = PETSc.Options(options_prefix).getReal("frames_nested_rtol", NESTED_RTOL)
-    gnorm0 = [None]  # what TAO's relative gradient test divides by
+    def tao_gnorm0(self) -> float:
+        """The |g₀| TAO's relative gradient test divides by (the original solve's)."""
+        return self.resume.tao_gnorm0 if self.resume is not None else self.gnorm0
 
-    def tao_gnorm0() -> float:
-        return resume.tao_gnorm0 if resume is not None else gnorm0[0]
-
-    with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
-        owned.enter_context(problem.tracking())
+    def initial_iterate(self, owned: ExitStack) -> PETSc.Vec:
+        """x at the start: R(q), or the resumed iterate as it is (owned by ``owned``)."""
+        problem, resume = self.problem, self.resume
         x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
         owned.callback(x.destroy)
         if resume is None:
@@ -542,42 +577,53 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             problem.held = None if resume.held is None else resume.held.copy()
             problem.held_only = resume.held_only and problem.held is not None
         problem.write_x(x, keep=True)
-        g = x.duplicate()
-        owned.callback(g.destroy)
-        model = None
-        if hessian is not None:
-            opts = PETSc.Options(options_prefix)
-            prefix = NEWTON_KSP_PREFIX.get(tao_type)
-            # nls and ntr with the reduced PC need no 5N pre-matrix (the bounded types
-            # take sub-matrices of it: they keep it).
-            lean = (tao_type in ("nls", "ntr")
-                    and opts.getString(f"{prefix}pc_type", "") == "python"
-                    and opts.getString(f"{prefix}pc_python_type", "").endswith(
-                        "ReducedFactorPC"))
-            # -frames_active_consistent (nls, the default): the active set is decided with
-            # the Newton step (GaussNewtonModel._consistent_active_set) instead of held and
-            # released by the gradient; Newton steps that no longer grow with the mesh,
-            # for more factorisations per step (benchmarks/README).
-            consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", True)
-            model = owned.enter_context(GaussNewtonModel(
-                problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
-                damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
-                adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
-                release=opts.getReal("frames_active_release",
-                                     0.0 if consistent else RELEASE_RATIO),
-                consistent=consistent,
-                rounds=opts.getInt("frames_active_rounds", CONSISTENT_ROUNDS),
-                bound_steps=opts.getBool("frames_gn_adapt_bound", True),
-                exact=hessian == "exact", lean=lean,
-                switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
-                        if hessian == "hybrid" else None)))
-            if resume is not None and resume.adaptation is not None:
-                model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
-                             resume.step, exact=resume.exact_hessian,
-                             released=resume.released)
-        tao = PETSc.TAO().create(comm)
+        return x
+
+    def newton_model(self, owned: ExitStack, x: PETSc.Vec) -> GaussNewtonModel | None:
+        """The Newton model of the second-order types from the options, resumed where
+        the solve is (owned by ``owned``); None for the other types."""
+        hessian, tao_type, resume = self.hessian, self.tao_type, self.resume
+        if hessian is None:
+            return None
+        opts = PETSc.Options(self.options_prefix)
+        prefix = NEWTON_KSP_PREFIX.get(tao_type)
+        # nls and ntr with the reduced PC need no 5N pre-matrix (the bounded types
+        # take sub-matrices of it: they keep it).
+        lean = (tao_type in ("nls", "ntr")
+                and opts.getString(f"{prefix}pc_type", "") == "python"
+                and opts.getString(f"{prefix}pc_python_type", "").endswith(
+                    "ReducedFactorPC"))
+        # -frames_active_consistent (nls, the default): the active set is decided with
+        # the Newton step (ActiveSetRules._consistent_active_set) instead of held and
+        # released by the gradient; Newton steps that no longer grow with the mesh,
+        # for more factorisations per step (benchmarks/README).
+        consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", True)
+        model = owned.enter_context(GaussNewtonModel(
+            self.problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
+            damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
+            adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
+            release=opts.getReal("frames_active_release",
+                                 0.0 if consistent else RELEASE_RATIO),
+            consistent=consistent,
+            rounds=opts.getInt("frames_active_rounds", CONSISTENT_ROUNDS),
+            bound_steps=opts.getBool("frames_gn_adapt_bound", True),
+            exact=hessian == "exact", lean=lean,
+            switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
+                    if hessian == "hybrid" else None)))
+        if resume is not None and resume.adaptation is not None:
+            model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
+                         resume.step, exact=resume.exact_hessian,
+                         released=resume.released)
+        return model
+
+    def create_tao(self, owned: ExitStack, x: PETSc.Vec, g: PETSc.Vec) -> PETSc.TAO:
+        """The TAO on x (gradient into g) with the guarded callbacks, its options set
+        (owned by ``owned``)."""
+        guarded, model = self.guarded, self.model
+        objective, objective_gradient, update = self.callbacks
+        tao = PETSc.TAO().create(self.comm)
         owned.callback(tao.destroy)
-        tao.setOptionsPrefix(options_prefix)
+        tao.setOptionsPrefix(self.options_prefix)
         tao.setSolution(x)
         tao.setObjectiveGradient(guarded(objective_gradient), g)
         tao.setObjective(guarded(objective))  # line-search trials need no gradient
@@ -585,35 +631,48 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             pre = model.shell if model.lean else model.assembled
             tao.setHessian(guarded(model.update), model.shell, pre)
         tao.setUpdate(guarded(update))
-        tao.setMonitor(guarded(record))
+        tao.setMonitor(guarded(self.record))
         tao.setFromOptions()
         if model is not None:
             # The Newton KSP's ReducedFactorPC (the default PC), whenever PETSc makes it,
             # takes this model; any other PC acts on the model's pre-matrix as it is.
             owned.enter_context(ReducedFactorPC.solving(model,
                                                         tao.getKSP().getOptionsPrefix() or ""))
-            tao.getKSP().setMonitor(guarded(count_linear))
-            model.on_error = keep  # the shell's products, guarded too
-        original_tests = _continue_tests(tao, resume) if resume is not None else None
+            tao.getKSP().setMonitor(guarded(self.count_linear))
+            model.on_error = self.keep  # the shell's products, guarded too
+        return tao
 
-        start = time.perf_counter()
-        try:
-            tao.solve()
-        except PETSc.Error:
-            if not errors:
-                raise
-        if errors:  # outside the except clause: no PETSc.Error chained to it
-            raise _released(errors.pop())
-        wall = earlier + comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
-        problem.set_from_x(tao.getSolution())
-        reason = converged_reason_name(tao.getConvergedReason())
-        if stopped_on_h[0] and reason == "CONVERGED_USER":
-            reason = H_RTOL_REASON
-        if original_tests is not None:
-            reason = _original_reason(original_tests, reason, history[-1]["gnorm"])
-    iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
-    return SolveResult(history=history, converged_reason=reason, iterations=iterations,
-                       wall_time_s=wall)
+    def run(self) -> SolveResult:
+        """Make x, g, the model and the TAO, solve, destroy them; the result."""
+        problem, comm = self.problem, self.comm
+        with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
+            owned.enter_context(problem.tracking())
+            x = self.initial_iterate(owned)
+            g = x.duplicate()
+            owned.callback(g.destroy)
+            self.model = self.newton_model(owned, x)
+            tao = self.create_tao(owned, x, g)
+            original_tests = (_continue_tests(tao, self.resume) if self.resume is not None
+                              else None)
+
+            self.start = time.perf_counter()
+            try:
+                tao.solve()
+            except PETSc.Error:
+                if not self.errors:
+                    raise
+            if self.errors:  # outside the except clause: no PETSc.Error chained to it
+                raise _released(self.errors.pop())
+            wall = self.earlier + comm.allreduce(time.perf_counter() - self.start, op=MPI.MAX)
+            problem.set_from_x(tao.getSolution())
+            reason = converged_reason_name(tao.getConvergedReason())
+            if self.stopped_on_h and reason == "CONVERGED_USER":
+                reason = H_RTOL_REASON
+            if original_tests is not None:
+                reason = _original_reason(original_tests, reason, self.history[-1]["gnorm"])
+        iterations = len(self.history) - 1  # TAO's own count restarts in some types (bncg)
+        return SolveResult(history=self.history, converged_reason=reason,
+                           iterations=iterations, wall_time_s=wall)
 
 
 def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
