@@ -10,14 +10,13 @@ The names most used are here: ``solvers.frame_problem(q)``, ``solvers.solve(prob
 
 from ufl_frames.fem.problem import Evaluation, FrameProblem, frame_problem
 from ufl_frames.solvers.hessian import GaussNewtonModel
+from ufl_frames.solvers.results import SolveResult, SolverState
 from ufl_frames.solvers.tao import (
     DEFAULT_OPTIONS,
     ENERGY_RTOL,
     SECOND_ORDER_TYPES,
     SUPPORTED_TYPES,
     TYPE_OPTIONS,
-    SolveResult,
-    SolverState,
     converged_reason_name,
     solve,
 )

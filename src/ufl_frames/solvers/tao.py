@@ -57,14 +57,12 @@ gave no value, and ``setFromOptions`` comes last.
 
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass, field
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
 import dolfinx.fem.petsc  # noqa: E402, F401
-import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
@@ -77,6 +75,7 @@ from ufl_frames.solvers.hessian import (  # noqa: E402
     GaussNewtonModel,
 )
 from ufl_frames.solvers.reduced_pc import ReducedFactorPC  # noqa: E402
+from ufl_frames.solvers.results import SolveResult, SolverState  # noqa: E402
 
 #: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
 #: ``-tao_fmin`` are not here: their defaults depend on the problem (see :func:`solve`).
@@ -148,7 +147,18 @@ def _h_converged(history: list[dict], rtol: float, window: int = H_WINDOW,
     indefinite, whose tiny decreases say nothing of what is left) and the decrease they
     bound (:func:`remaining_decrease`) is at most ``rtol`` H, or at most ``nested_rtol``
     (H_c − H) where the coarser level's H_c = ``coarse_energy`` is given (see
-    :data:`NESTED_RTOL`)."""
+    :data:`NESTED_RTOL`).
+
+    Args:
+        history: the solve's history (:attr:`SolveResult.history`).
+        rtol: ε of the test relative to H (``-frames_h_rtol``).
+        window: Newton steps per window.
+        coarse_energy: the coarser level's H (None: no nested test).
+        nested_rtol: θ of the nested test (``-frames_nested_rtol``).
+
+    Returns:
+        Whether the solve may stop.
+    """
     steps = history[-2 * window:]
     energy = history[-1]["H"] if history else 0.0
     tolerance = rtol * energy
@@ -200,6 +210,14 @@ def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
     iterations per Newton step grew 107 → 159 → 340 from h = 0.1 to 0.025 on the
     non-isotropic piano, with the factorisation they are 2 at every size
     (``benchmarks/scaling.py``).
+
+    Args:
+        tao_type: the TAO type (no options for types without a Newton KSP).
+        comm: the communicator of the solve.
+        reduced: the reduced PC (else a PC of the pre-matrix itself).
+
+    Returns:
+        The options, under the Newton KSP's prefix.
     """
     prefix = NEWTON_KSP_PREFIX.get(tao_type)
     if prefix is None:
@@ -209,8 +227,7 @@ def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
                    f"{prefix}pc_python_type": "ufl_frames.solvers.reduced_pc.ReducedFactorPC"}
         if PETSc.Sys.hasExternalPackage("mumps"):
             # MUMPS's block low-rank factorisation at a 1e-8 threshold: the same steps
-            # and Krylov counts; at 10⁶ triangles on 2 ranks 12.6 s a factorisation
-            # instead of 20.6 s, at 10⁵ as fast as the full-rank one (benchmarks/README)
+            # and Krylov counts, faster factorisations on large meshes (benchmarks/README)
             options[f"{prefix}reduced_mat_mumps_icntl_35"] = "1"
             options[f"{prefix}reduced_mat_mumps_cntl_7"] = str(MUMPS_BLR_TOLERANCE)
         return options
@@ -230,86 +247,6 @@ _REASONS = {
 def converged_reason_name(reason: int) -> str:
     """TAO's converged reason as text (e.g. ``CONVERGED_GRTOL``)."""
     return _REASONS.get(reason, str(reason))
-
-
-@dataclass
-
-
-class SolveResult:
-    """Outcome of :func:`solve`.
-
-    ``history`` has one entry per TAO monitor call that found a new iterate: the
-    initial state, then one per accepted step (rejected trust-region steps, which
-    ``ntr`` reports too, are left out). ``iterations`` counts those steps; it can
-    exceed TAO's own count by one (``nls`` and ``bncg`` take a first step that TAO
-    numbers 0 again). With a Newton model (``nls``, ``ntr``, ...) each entry also has
-    ``ksp_its``: the Krylov iterations spent since the previous entry, and
-    ``factorisations``: how many faces of the aspect bound the Newton step that led there
-    set up its preconditioner for (more than one: the rounds of
-    ``-frames_active_consistent``, see ``GaussNewtonModel._consistent_active_set``).
-    """
-
-    history: list[dict]
-    converged_reason: str
-    iterations: int
-    wall_time_s: float
-
-    @property
-    def H_initial(self) -> float:
-        return self.history[0]["H"]
-
-    @property
-    def H_final(self) -> float:
-        return self.history[-1]["H"]
-
-    @property
-    def E_final(self) -> float:
-        return self.history[-1]["E"]
-
-    @property
-    def krylov_iterations(self) -> list[int] | None:
-        """Krylov iterations per accepted step (None without a Newton model)."""
-        if not self.history or "ksp_its" not in self.history[0]:
-            return None
-        return [entry["ksp_its"] for entry in self.history[1:]]
-
-
-@dataclass
-class SolverState:
-    """A solve at an accepted iterate: what :func:`solve` needs (``resume``) to go on from
-    there as the solve that made it would have. Arrays are this rank's local rows.
-
-    ``rows``: the iterate q (owned rows, (n, 5)); ``history`` as in :class:`SolveResult`
-    so far; ``tao_iterations``: TAO's own count there; ``tao_gnorm0``: the gradient norm
-    TAO's relative test (``-tao_gttol``) divides by; with a Newton model, its damping
-    state (``adaptation``, ``model_gnorm0``), the last step length (``step``), the
-    aspect bound's active set of the last Newton step (``active``) and the rows it held
-    there (``held``; None: none; ``held_only``: they were the whole active set, see
-    :attr:`~ufl_frames.fem.problem.FrameProblem.held_only`), the releases it left to the
-    next step (``released``, see
-    :attr:`~ufl_frames.solvers.hessian.GaussNewtonModel.released`), owned and ghost rows,
-    and whether the model was the exact Hessian there (``exact_hessian``: the hybrid model
-    may have switched).
-    """
-
-    rows: np.ndarray = field(repr=False)
-    history: list[dict]
-    tao_iterations: int
-    tao_gnorm0: float
-    wall_time_s: float
-    step: float = 0.0
-    adaptation: float | None = None
-    model_gnorm0: float | None = None
-    active: np.ndarray | None = field(default=None, repr=False)
-    held: np.ndarray | None = field(default=None, repr=False)
-    held_only: bool = False
-    released: np.ndarray | None = field(default=None, repr=False)
-    exact_hessian: bool | None = None
-
-    @property
-    def iterations(self) -> int:
-        """Accepted steps so far (as :attr:`SolveResult.iterations`)."""
-        return len(self.history) - 1
 
 
 #: TAO types that run on this problem (checked by the CLI before anything is meshed).
@@ -363,6 +300,20 @@ def solve(
     iteration) adds the test on H against the discretisation error: the Newton types
     also stop once the decrease of H still to come is below θ (``coarse_energy`` − H),
     θ = ``-frames_nested_rtol`` (default :data:`NESTED_RTOL`).
+
+    Args:
+        problem: the frame problem; ``problem.q`` is the start and holds the result.
+        max_it: default of ``-tao_max_it``.
+        options_prefix: prefix of the TAO's options.
+        defaults: option defaults over this module's (the command line wins).
+        monitor: called with each history entry.
+        checkpoint: called with the :class:`SolverState` at each accepted iterate.
+        resume: a state to go on from.
+        reference_gradient: a coarser level's |g₀|, a floor of G.
+        coarse_energy: the coarser level's H (finest level of nested iteration).
+
+    Returns:
+        The :class:`SolveResult`.
     """
     opts = PETSc.Options(options_prefix)
     tao_type = opts.getString("tao_type", (defaults or {}).get("tao_type",
@@ -691,7 +642,16 @@ def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
 
 def _original_reason(tests: tuple[float, float], reason: str, gnorm: float) -> str:
     """The reason the original tests give where :func:`_continue_tests` rewrote them: a
-    gradient below the absolute tolerance only by the rewritten gttol test is GTTOL."""
+    gradient below the absolute tolerance only by the rewritten gttol test is GTTOL.
+
+    Args:
+        tests: the original (gatol, gttol) :func:`_continue_tests` returned.
+        reason: TAO's reason, as text.
+        gnorm: the last iterate's gradient norm.
+
+    Returns:
+        The reason, as text.
+    """
     gatol, gttol = tests
     if reason == "CONVERGED_GATOL" and gnorm > gatol and gttol > 0:
         return "CONVERGED_GTTOL"
