@@ -451,7 +451,13 @@ class _TaoSolve:
         return call
 
     def count_linear(self, ksp, it, rnorm):
-        """KSP monitor: counts the Krylov iterations."""
+        """KSP monitor: counts the Krylov iterations.
+
+        Args:
+            ksp: the Newton KSP.
+            it: its iteration number (0: the start of a solve, not counted).
+            rnorm: the residual norm.
+        """
         if it > 0:
             self.linear_iterations[0] += 1
 
@@ -568,8 +574,16 @@ class _TaoSolve:
         return model
 
     def create_tao(self, owned: ExitStack, x: PETSc.Vec, g: PETSc.Vec) -> PETSc.TAO:
-        """The TAO on x (gradient into g) with the guarded callbacks, its options set
-        (owned by ``owned``)."""
+        """The TAO with the guarded callbacks, its options set.
+
+        Args:
+            owned: the stack that destroys the TAO (and ends the PC's model scope).
+            x: the iterate's vector.
+            g: the gradient's vector.
+
+        Returns:
+            The TAO.
+        """
         guarded, model = self.guarded, self.model
         objective, objective_gradient, update = self.callbacks
         tao = PETSc.TAO().create(self.comm)
