@@ -16,7 +16,8 @@ from ufl_frames import checkpoint
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
-from ufl_frames.solvers.hessian import CONSISTENT_ROUNDS, GaussNewtonModel
+from ufl_frames.solvers.active_set import CONSISTENT_ROUNDS
+from ufl_frames.solvers.hessian import GaussNewtonModel
 
 COMM = MPI.COMM_WORLD
 CONSISTENT = {"frames_active_consistent": "true"}  # the default of nls, said explicitly

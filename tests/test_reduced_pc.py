@@ -14,7 +14,8 @@ from ufl_frames import solvers
 from ufl_frames.bootstrap import options_scope
 from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
-from ufl_frames.solvers.hessian import GaussNewtonModel, ReducedFactorPC
+from ufl_frames.solvers.hessian import GaussNewtonModel
+from ufl_frames.solvers.reduced_pc import ReducedFactorPC
 
 COMM = MPI.COMM_WORLD
 

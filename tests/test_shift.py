@@ -87,7 +87,7 @@ class _Tao:
 
 
 def model_at(problem, exact):
-    """A model set up as ``solvers.tao._solve`` does, then updated at the start as TAO does."""
+    """A model set up as ``solvers.tao._TaoSolve`` does, then updated at the start as TAO does."""
     x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
     problem.retract()
     problem.write_x(x)
@@ -249,7 +249,7 @@ def test_tao_perturbed_newton_step(tao_type):
     """TAO with the perturbation forced: its step d solves (B + pert I) d = −g.
 
     One iteration of ``nls`` / ``bnls`` from the MBO field (Gauss–Newton, non-isotropic),
-    set up as ``solvers.tao._solve`` does, with ``-tao_*_sval`` = μ (so pert = μ from the first
+    set up as ``solvers.tao._TaoSolve`` does, with ``-tao_*_sval`` = μ (so pert = μ from the first
     iteration on), CG to 1e-12 with Jacobi on the (shifted) pre-matrix and a unit step
     (``-tao_ls_type unit``): x₁ − x₀ is the Newton direction TAO computed.
     """

@@ -23,7 +23,7 @@ import numpy as np
 
 from ufl_frames.fem.gather import gather_rows, input_node_order
 from ufl_frames.output.folder import create_missing
-from ufl_frames.solvers.tao import SolverState
+from ufl_frames.solvers.results import SolverState
 
 __all__ = ["CHECKPOINT_EVERY", "FOLDER", "CheckpointError", "CheckpointFolder",
            "CheckpointWriteError", "check_run", "mesh_key", "read", "restore"]

@@ -5,9 +5,10 @@ the Gauss–Newton (or, with ``exact``, the full) Hessian of the integrability e
 made Riemannian with the curvature terms of :class:`~ufl_frames.fem.manifold.FrameManifold`
 and damped in the H¹ metric; with ``switch`` (the hybrid model, the default for
 non-isotropic frames) Gauss–Newton first and the exact Hessian near the minimum.
+The aspect bound's active set of its steps is decided by the rules of
+:mod:`~ufl_frames.solvers.active_set`, and its systems are preconditioned by
+:class:`~ufl_frames.solvers.reduced_pc.ReducedFactorPC`.
 """
-
-from contextlib import contextmanager
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
@@ -23,15 +24,21 @@ from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem import kernels  # noqa: E402
 from ufl_frames.fem.problem import Evaluation, FrameProblem  # noqa: E402
+from ufl_frames.solvers.active_set import (  # noqa: E402
+    CONSISTENT_ROUNDS,
+    RELEASE_RATIO,
+    ActiveSetRules,
+)
 
-__all__ = ["DEFAULT_DAMPING", "HYBRID_SWITCH", "GaussNewtonModel", "ReducedFactorPC"]
+__all__ = ["DEFAULT_DAMPING", "HYBRID_SWITCH", "GaussNewtonModel"]
 
 #: Default λ₀ of the Levenberg–Marquardt damping (``-frames_gn_damping``).
 DEFAULT_DAMPING = 1.0
 #: The damping adapts to the steps (``-frames_gn_adapt``, on by default): after a step
 #: the line search accepted whole, the factor a ∈ [:data:`ADAPT_FLOOR`, 1] of λ = λ₀ a …
 #: shrinks by :data:`ADAPT_FACTOR`, after a shortened one it grows back (unless the step
-#: put frames on the aspect bound: :meth:`GaussNewtonModel._reached_bound`). A fixed λ₀ = 1
+#: put frames on the aspect bound:
+#: :meth:`~ufl_frames.solvers.active_set.ActiveSetRules._reached_bound`). A fixed λ₀ = 1
 #: damped the non-isotropic piano into a linear crawl (87 / 91 / 194 Newton iterations at
 #: h = 0.1 / 0.05 / 0.025, with exact linear solves too); a fixed λ₀ = 1e-3 takes 26 / 47
 #: there, but sends the isotropic annulus from MBO to another, 20x higher minimum and
@@ -43,22 +50,6 @@ ADAPT_FLOOR = 1e-3
 #: ``-frames_hessian_switch τ``): Gauss–Newton until |g| ≤ τ |g₀|, the exact Riemannian
 #: Hessian from there on, see :meth:`GaussNewtonModel._switch`.
 HYBRID_SWITCH = 1e-3
-#: η of the aspect bound's release rule (``-frames_active_release``; 0: off), see
-#: :meth:`GaussNewtonModel._hold_active_set`.
-RELEASE_RATIO = 1.0
-#: Factorisations of a face more at most per Newton step in
-#: :meth:`GaussNewtonModel._consistent_active_set` (``-frames_active_rounds r``). Measured
-#: on the non-isotropic piano (benchmarks/README): 2 rounds took as few Newton steps as 4
-#: or 6, with fewer factorisations; 1 round as few as 2, with 1.44 factorisations a step
-#: instead of 1.79 at 2.5·10⁵ triangles on 2 ranks (197.1 s against 221.9 s end to end,
-#: H 1 % lower) and 62.3 s against 63.9 s at 10⁵ serially; 0 rounds more steps (42
-#: against 24 on the finest level at 10⁴ triangles, 83.0 s at 10⁵, H 10 % higher).
-CONSISTENT_ROUNDS = 1
-#: … and none where the step pushes no more than this fraction of the held frames off the
-#: bound: those the retraction clamps, and the step's releases wait for the next Newton
-#: step (10⁵ triangles: 100.0 s of solve; 118.3 s when a release always ran a round;
-#: a round for every pushed frame cost more at every size, benchmarks/README).
-CONSISTENT_TOLERANCE = 0.05
 
 
 def sobolev_form(V: fem.FunctionSpace, area: float) -> ufl.Form:
@@ -76,8 +67,18 @@ def _block_diagonal(blocks: np.ndarray, index_map, comm, result=None) -> PETSc.M
     (block size r = c) or rectangular (r rows and c columns per vertex: a tangent basis).
 
     Every entry of a block is stored, zeros included, so that the pattern does not depend
-    on the values. With ``result`` (made by an earlier call) its values are replaced in
-    place: PtAP with reuse in parallel needs the same P object every time.
+    on the values.
+
+    Args:
+        blocks: (n, r, c) array, one block per owned vertex.
+        index_map: the vertices' DOLFINx index map (owned range, global size).
+        comm: the matrix's communicator.
+        result: a matrix made by an earlier call with blocks of the same shape: its
+            values are replaced in place (PtAP with reuse in parallel needs the same P
+            object every time); None: a new matrix.
+
+    Returns:
+        The matrix (``result`` where given).
     """
     n, r, c = blocks.shape
     first = index_map.local_range[0]
@@ -102,18 +103,23 @@ ALLATONCE_ROWS = 1_500_000
 
 
 def _ptap(A: PETSc.Mat, P: PETSc.Mat, result: PETSc.Mat | None = None) -> PETSc.Mat:
-    """Pᵀ A P (into ``result`` where given: the numeric product of the same pattern); the
-    models other than the lean one (which assembles R directly).
+    """Pᵀ A P; the models other than the lean one (which assembles R directly).
 
     PETSc's default parallel algorithm keeps intermediate products for the reuse that are
     larger than the result; its "allatonce" keeps none but its numeric products are
-    slower. Measured for Tᵀ G T on 2 ranks (benchmarks/README): at 2.5·10⁵ triangles the
-    first product took a rank from 470 to 700 MB (the result: 48 MB a rank), with
-    "allatonce" to 541 MB, but a numeric product took 0.78–0.93 s instead of 0.43 s, and at
-    10⁵ triangles the solve 78.3 s instead of 67.6 s. At 10⁶ triangles memory is what
-    runs out: the peak after two Newton steps is 3 019 instead of 3 660 MB a rank. So A
-    of :data:`ALLATONCE_ROWS` rows or more gets "allatonce" in parallel, unless the user
-    chose (``-matptap_via``); serial PETSc has no such algorithm and keeps less.
+    slower (benchmarks/README, "Memory of the reduced matrix's product in parallel"):
+    where memory runs out, on large meshes, it pays. So A of :data:`ALLATONCE_ROWS` rows
+    or more gets "allatonce" in parallel, unless the user chose (``-matptap_via``);
+    serial PETSc has no such algorithm and keeps less.
+
+    Args:
+        A: the square matrix.
+        P: the (rectangular) matrix it is projected with.
+        result: a product made by an earlier call with the same pattern: the numeric
+            product goes into it; None: a new one.
+
+    Returns:
+        Pᵀ A P (``result`` where given).
     """
     if result is not None:
         return A.PtAP(P, result=result)
@@ -123,7 +129,7 @@ def _ptap(A: PETSc.Mat, P: PETSc.Mat, result: PETSc.Mat | None = None) -> PETSc.
         return A.PtAP(P)
 
 
-class GaussNewtonModel:
+class GaussNewtonModel(ActiveSetRules):
     r"""Riemannian (Gauss–)Newton Hessian of H on 𝓜, with Sobolev (H¹) damping.
 
     In the scaled unknowns x = W q (W = diag √m) at the current iterate:
@@ -148,8 +154,8 @@ class GaussNewtonModel:
       :attr:`FrameProblem.gradient_scale`: from an already nearly stationary start (a
       restart, |g₀| ≪ G) the damping starts near its floor instead of at its largest
       (|g|/|g₀| = 1), and |g₀| = 0 is no 0/0. Without a floor the Newton systems
-      become singular and the Krylov iterations explode (measured: 85 Newton steps and
-      ~70 s against 35 steps and ~3 s with r = 1e-3 on the annulus at h = 0.05).
+      become singular and the Krylov iterations explode (85 Newton steps against 35
+      with r = 1e-3 on the annulus at h = 0.05, benchmarks/README).
 
     With ``exact`` (``-frames_hessian exact``, the default for isotropic frames) JᵀJ is
     replaced by the full Hessian ∇²H (the second derivative of H's UFL form, by the
@@ -168,14 +174,15 @@ class GaussNewtonModel:
     once |g| ≤ τ |g₀| (:meth:`_switch`), which ends Gauss–Newton's linear tail.
 
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
-    is the preconditioning matrix. By default :class:`ReducedFactorPC` inverts it in
+    is the preconditioning matrix. By default :class:`~.reduced_pc.ReducedFactorPC` inverts it in
     reduced tangent coordinates (:meth:`reduced_operator`); ``-tao_nls_pc_type`` /
     ``-tao_ntr_pc_type`` (cholesky, gamg, hypre, lu, ...) act on the 5N matrix itself.
     With ``lean`` (``nls`` and ``ntr`` with the reduced PC) no 5N matrix is made at all:
     R is assembled directly by the kernel of :func:`kernels.reduced_model_form` (not as
-    Tᵀ G T by PtAP: at 10⁶ triangles 4.9 s instead of 14.1 s serially, 751 instead of
-    3 972 MB), the one product with G the active set needs by a vector kernel, and the
-    shell applies B from R (T R Tᵀ + μ (I − T Tᵀ)) and is TAO's pre-matrix too.
+    Tᵀ G T by PtAP, which takes longer and more memory: benchmarks/README, "The reduced
+    matrix assembled directly"), the one product with G the active set needs by a vector
+    kernel, and the shell applies B from R (T R Tᵀ + μ (I − T Tᵀ)) and is TAO's
+    pre-matrix too.
 
     TAO's Hessian perturbation (``nls``, ``bnls``: ``MatShift`` by ``pert`` after each
     Hessian evaluation) shifts both: the shell (:meth:`shift`, so the shell is B + pert·I)
@@ -197,6 +204,24 @@ class GaussNewtonModel:
                  release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True,
                  switch: float | None = None, consistent: bool = False,
                  rounds: int = CONSISTENT_ROUNDS):
+        """The model at ``problem``'s current q (collective; :meth:`free` destroys it).
+
+        Args:
+            problem: the frame problem whose H is modelled.
+            template: a vector of TAO's unknowns x (sizes and layout of the shell's).
+            damping: λ₀ of the damping (``-frames_gn_damping``).
+            damping_min: its floor r (``-frames_gn_damping_min``).
+            exact: the exact Riemannian Hessian instead of Gauss–Newton.
+            adapt: adapt the damping to the steps (see :data:`ADAPT_FACTOR`).
+            release: η of the hold-and-release rule
+                (:meth:`~ufl_frames.solvers.active_set.ActiveSetRules._hold_active_set`).
+            lean: no 5N × 5N matrix: the reduced matrix assembled directly.
+            bound_steps: a shortened step that reached the bound counts as a whole one.
+            switch: τ of the hybrid model (None: no switch).
+            consistent: decide the active set with the Newton step
+                (:meth:`~ufl_frames.solvers.active_set.ActiveSetRules._consistent_active_set`).
+            rounds: refactorisations at most per step there.
+        """
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.consistent = consistent  # see _consistent_active_set
         self.rounds = rounds  # refactorisations at most per step there
@@ -220,7 +245,7 @@ class GaussNewtonModel:
     def _model_form(self, exact: bool) -> fem.Form:
         """The compiled form of the model's matrix: ∇²H (``exact``) or JᵀJ, plus the damping
         λ (K + M/A). λ is part of the form (a Constant): one assembly per Newton step, no
-        second 5N × 5N matrix to add (at 1e5 triangles its MatAXPY took 5 % of a step).
+        second 5N × 5N matrix to add each step).
         Both are the hand-written kernels of :mod:`ufl_frames.fem.kernels`: the same
         matrices as the UFL forms (``energy.gauss_newton_form``, the second derivative of
         H, plus :func:`sobolev_form`) to round-off, assembled in about half the time.
@@ -268,8 +293,17 @@ class GaussNewtonModel:
         self.shell.setUp()
 
     def _assemble(self, result, gnorm, evaluation: Evaluation):
-        """The pre-matrix at the current q; ``evaluation`` (H, ∂H/∂x there) decides the
-        active aspect bounds and gives the curvature terms."""
+        """The pre-matrix at the current q.
+
+        Args:
+            result: the pre-matrix of an earlier assembly, refilled; None: a new one.
+            gnorm: |g|, which sets the damping (None: its largest value).
+            evaluation: H and ∂H/∂x at q, which decide the active aspect bounds and give
+                the curvature terms.
+
+        Returns:
+            The 5N × 5N pre-matrix (None for the lean model).
+        """
         problem, G = self.problem, self.gauss_newton
         if self.gnorm0 is None and gnorm is not None:
             # The first Hessian is at the initial iterate. Its gradient is no reference
@@ -362,7 +396,7 @@ class GaussNewtonModel:
         shift, σ the sphere's curvature of the exact model (0 for Gauss–Newton).
 
         The pre-matrix P G P + μ (I − P) − σ I of the model (P = T Tᵀ) then has the inverse
-        T R⁻¹ Tᵀ + (I − T Tᵀ)/(μ − σ + s): :class:`ReducedFactorPC` applies it with one
+        T R⁻¹ Tᵀ + (I − T Tᵀ)/(μ − σ + s): :class:`~.reduced_pc.ReducedFactorPC` applies it with one
         factorisation of R, c/5 of the unknowns of the pre-matrix (for c = 3 about a
         fifth of the factorisation's flops). Rebuilt after each assembly, on demand;
         the matrices are the model's (reused, same pattern: one symbolic factorisation).
@@ -441,7 +475,16 @@ class GaussNewtonModel:
         its damping factor and reference gradient, the active set of its last assembly and
         the releases it left to the next step (:attr:`released`), the length of its last
         step (which a new TAO does not report) and, for the hybrid model, whether it had
-        switched to the exact Hessian."""
+        switched to the exact Hessian.
+
+        Args:
+            adaptation: the damping factor a.
+            gnorm0: the reference gradient |g₀| of the damping.
+            active: the active set of the last assembly (None: none yet).
+            step: the last step length.
+            exact: whether the model was the exact Hessian there.
+            released: the releases left to the next step.
+        """
         self.adaptation, self.gnorm0 = adaptation, gnorm0
         self.active = None if active is None else np.asarray(active, dtype=bool).copy()
         self.released = None if released is None else np.asarray(released, dtype=bool).copy()
@@ -469,7 +512,15 @@ class GaussNewtonModel:
         self.exact, self.form = True, self._model_form(True)
 
     def update(self, tao, x, H, P):
-        """TAO Hessian callback at x (TAO has just evaluated the gradient there)."""
+        """TAO Hessian callback at x (TAO has just evaluated the gradient there): adapts the
+        damping, decides the active set, switches model where due and assembles.
+
+        Args:
+            tao: the TAO.
+            x: the iterate.
+            H: the Hessian TAO was given (the shell).
+            P: its pre-matrix.
+        """
         self.problem.set_from_x(x)
         free = self._free_basis()
         if self.adapt and self.gnorm0 is not None:  # after the first Newton step
@@ -490,130 +541,6 @@ class GaussNewtonModel:
         self.assemble(gnorm=gnorm)
         if self.consistent:
             self._consistent_active_set(tao.getKSP(), H, P, g)
-
-    def _pushed_off_bound(self, pc: PETSc.PC, g: PETSc.Vec,
-                          step: PETSc.Vec | None = None) -> np.ndarray:
-        """Owned frames on the aspect bound that the step −(PC⁻¹ g) pushes outwards
-        (``step``: where PC⁻¹ g is put, a work vector of the caller; None: a new one)."""
-        work = g.duplicate() if step is None else step
-        try:
-            pc.apply(g, work)  # ≈ B⁻¹ g: the Newton direction is −work
-            return self.problem.manifold.pushed_off_bound(
-                self.problem.rows,
-                -work.getArray(readonly=True).reshape(-1, self.problem.algebra.count))
-        finally:
-            if step is None:
-                work.destroy()
-
-    def _bounded(self) -> bool:
-        """Whether the frames have an aspect bound that an active set applies to."""
-        c = self.problem.constraints
-        return not c.isotropic and c.max_aspect is not None
-
-    def _start_active_set(self, g: PETSc.Vec, free: np.ndarray | None) -> None:
-        """The face a Newton step of :meth:`_consistent_active_set` starts from: the frames
-        the gradient holds on the bound and those the last step ended with (while still
-        on it), less those the last step released without a round (:attr:`released`),
-        held exactly (:attr:`FrameProblem.held_only`); ``g`` is put on that face.
-        ``free``: :meth:`_free_basis` (None: computed here)."""
-        problem = self.problem
-        problem.held, problem.held_only = None, False
-        if self.active is None or not self._bounded():
-            return
-        if free is None:
-            free = problem.manifold.tangent_basis(problem.rows,
-                                                  problem.evaluation().gradient_x)
-        held = problem.manifold.on_bound(free) | self.active
-        if self.released is not None:
-            held &= ~self.released
-            self.released = None
-        problem.held, problem.held_only = held, True
-        problem.riemannian_gradient(g)
-
-    def _consistent_active_set(self, ksp: PETSc.KSP, H: PETSc.Mat, P: PETSc.Mat,
-                               g: PETSc.Vec) -> None:
-        """The aspect bound's active set decided by the Newton step itself
-        (``-frames_active_consistent``, the default of ``nls``; collective): primal–dual
-        active-set rounds on the model's quadratic problem, with the preconditioner the
-        Krylov solve then reuses (exact with the default :class:`ReducedFactorPC` or a
-        factorisation of the pre-matrix).
-
-        The gradient decides the active set frame by frame, the step couples them: a
-        frame on the bound whose gradient points inwards can still be carried outwards
-        by its neighbours' step, and the retraction then clamps it back, bending the path
-        away from the Newton step (after a release on the non-isotropic piano at 3·10⁴
-        triangles H rose by 22 times the predicted decrease at the full step, and fell by
-        0.3 of it along the same step without the clamp). And a held frame is released
-        here by the model's multiplier, not by the gradient: once the step is taken, is
-        the model's gradient g_free + G δ (g_free: the gradient with no bound, G the
-        model's matrix, δ the step) still pointing outwards? The gradient alone released
-        a third of the set per step and a sixth came back, so a region of the bound
-        unwound from its edge over tens of steps.
-
-        From the face of :meth:`_start_active_set`, the step δ on the current face is
-        factorised and solved; the first round releases the held frames whose multiplier
-        is negative and holds the frames δ pushes off the bound, later rounds (at most
-        ``rounds`` factorisations more, ``-frames_active_rounds``, default
-        :data:`CONSISTENT_ROUNDS`; none for a few pushed frames:
-        :data:`CONSISTENT_TOLERANCE`) only hold pushed ones, so the set settles. Where no
-        round follows the first (few frames pushed, or ``rounds`` = 0), its releases are
-        left to the next Newton step
-        (:attr:`released`, see :meth:`_start_active_set`): a refactorisation for a few
-        released frames cost more than the step they wait (at 10⁵ triangles 100.0 s
-        against 118.3 s of solve, the same steps and H). ``g`` follows the face.
-        :attr:`bound_rounds` records (released, pushed) per round of the last step. On the
-        non-isotropic piano the finest level's Newton steps no longer grow with the mesh:
-        36 / 27 / 29 at 10⁴ / 3·10⁴ / 10⁵ triangles, against 58 / 36 / 60 with the
-        hold-and-release rule (benchmarks/README).
-        """
-        problem = self.problem
-        pc = ksp.getPC()
-        self.bound_rounds = []
-        if self.active is None or not self._bounded():
-            return
-        manifold, comm, n = problem.manifold, problem.constraints.comm, problem.owned
-        evaluation = problem.evaluation()
-        rows = problem.rows
-        unbounded = manifold.riemannian_gradient(  # only_held with nothing held: no bound
-            rows, evaluation.gradient_x, held=np.zeros(rows.shape[0], bool), only_held=True)
-        held = (self.active if problem.held is None else problem.held).copy()
-        ksp.setOperators(H, P)
-        step, product = g.duplicate(), g.duplicate()
-        try:
-            for round_ in range(self.rounds + 1):
-                pc.setUp()
-                pushed = self._pushed_off_bound(pc, g, step) & ~held[:n]
-                released = np.zeros(n, dtype=bool)
-                if round_ == 0:
-                    self._model_product(step, product)  # G (−δ)
-                    model_gradient = unbounded - product.getArray(readonly=True).reshape(
-                        -1, problem.algebra.count)
-                    # the multiplier ≥ 0 where the model gradient still pushes outwards
-                    released = self.active[:n] & ~manifold.pushed_off_bound(rows,
-                                                                            -model_gradient)
-                counts = (comm.allreduce(int(np.count_nonzero(released)), op=MPI.SUM),
-                          comm.allreduce(int(np.count_nonzero(pushed)), op=MPI.SUM))
-                self.bound_rounds.append(counts)
-                if counts == (0, 0):
-                    break
-                held_count = comm.allreduce(int(np.count_nonzero(self.active[:n])), op=MPI.SUM)
-                if round_ == self.rounds or counts[1] <= CONSISTENT_TOLERANCE * held_count:
-                    # a few frames clamped by the retraction cost less than a round (or no
-                    # round is left), and the released frames can wait for the next
-                    # step's face (only the first round releases)
-                    if counts[0]:
-                        self.released = np.zeros(rows.shape[0], dtype=bool)
-                        self.released[:n] = released
-                    break
-                held = held.copy()
-                held[:n] = (held[:n] & ~released) | pushed
-                problem.held, problem.held_only = held, True
-                problem.riemannian_gradient(g)
-                self._assemble_tangent(self.assembled, evaluation)
-        finally:
-            step.destroy()
-            product.destroy()
-        pc.setUp()
 
     def _model_product(self, v: PETSc.Vec, y: PETSc.Vec) -> None:
         """y = G v, G the damped model's matrix (in x, without the tangent projections) at
@@ -640,68 +567,6 @@ class GaussNewtonModel:
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         y.pointwiseMult(b, self.unscale)  # y = W⁻¹ G_q W⁻¹ v
 
-    def _free_basis(self) -> np.ndarray | None:
-        """The tangent basis at the current q with the aspect bound's active set decided by
-        the gradient alone (nothing held), which the bound rules compare with the last
-        Newton step's; None where neither rule is on, without a bound or before the first
-        Newton step."""
-        problem = self.problem
-        if (not (self.release or self.bound_steps) or self.active is None
-                or problem.constraints.isotropic
-                or problem.constraints.max_aspect is None):
-            return None
-        return problem.manifold.tangent_basis(problem.rows, problem.evaluation().gradient_x)
-
-    def _reached_bound(self, free: np.ndarray | None) -> bool:
-        """Whether the last step put frames on the aspect bound that the last Newton step
-        left free (collective): frames on it now, pushed outwards, not active then.
-
-        The retraction clamps such frames onto the bound, so the step taken bends away
-        from the Newton step and the line search shortens it; that is the bound's kink,
-        not a poor model, and growing the damping for it was the wrong answer: on the
-        non-isotropic piano at h = 0.05 / 0.025 / 0.0125 the damping then alternated
-        between a = 1 and 0.1 for most of the solve. Counting such a step as a whole
-        one (with the Armijo line search, :data:`~ufl_frames.solvers.tao.BOUNDED_OPTIONS`)
-        took the Newton steps from 45 / 72 / 122 to 24 / 42 / 67, to the same H.
-        ``-frames_gn_adapt_bound false`` grows the damping after every shortened step.
-        """
-        if free is None:
-            return False
-        problem = self.problem
-        active = problem.manifold.on_bound(free)
-        n = problem.owned
-        new = bool(np.any(active[:n] & ~self.active[:n]))
-        return problem.constraints.comm.allreduce(new, op=MPI.LOR)
-
-    def _hold_active_set(self, g: PETSc.Vec, free: np.ndarray | None) -> None:
-        """The anti-zigzag rule of the aspect bound (``-frames_active_release η``), where
-        the active set is not decided with the step (:meth:`_consistent_active_set`: the
-        other Newton types and PCs, or ``-frames_active_consistent false``).
-
-        Frames on the bound that were active at the last Newton step stay held there,
-        even where the gradient now points inwards, unless releasing them would add more
-        gradient than is left on the current face (|g_free − g_face| > η |g_face|): leave
-        a face only once it is nearly optimal on it (Moré–Toraldo). Without it, frames at
-        the bound flipped in and out at every step (141 vertices, 1212 changes in 99 steps
-        on the piano at h = 0.05) and the line search cut the steps. With a held set, TAO's
-        gradient ``g`` is recomputed on that face, so that the Newton system, the line
-        search and the stopping test see the same one. ``free``: :meth:`_free_basis`.
-        """
-        problem = self.problem
-        problem.held, problem.held_only = None, False
-        if not self.release or free is None:
-            return
-        manifold, rows = problem.manifold, problem.rows
-        gradient = problem.evaluation().gradient_x
-        free = manifold.projection(rows, gradient, basis=free)
-        face = manifold.projection(rows, gradient, held=self.active)
-        on_face = np.sqrt(manifold.inner(face, face))
-        released = np.sqrt(manifold.inner(free - face, free - face))
-        if released == 0.0 or released > self.release * on_face:
-            return
-        problem.held = self.active
-        problem.riemannian_gradient(g)
-
     def assemble(self, gnorm: float | None = None) -> None:
         """The model at the problem's current q, from its :meth:`~FrameProblem.evaluation`
         there (one vector assembly, or none when cached); ``gnorm`` = |g| sets the damping
@@ -714,7 +579,13 @@ class GaussNewtonModel:
     on_error = None
 
     def mult(self, mat, v, y):
-        """y = B v + shift·v (exceptions go to :attr:`on_error` first)."""
+        """MatShell product: y = B v + shift·v (exceptions go to :attr:`on_error` first).
+
+        Args:
+            mat: the shell.
+            v: the vector multiplied.
+            y: the result.
+        """
         try:
             self._mult(v, y)
         except BaseException as exc:
@@ -774,90 +645,3 @@ class GaussNewtonModel:
         self.free()
 
 
-class ReducedFactorPC:
-    r"""Preconditioner of the Newton systems in reduced tangent coordinates (PC python
-    context; the default of the Newton TAO types, see
-    :func:`ufl_frames.solvers.tao.newton_pc_options`).
-
-    Applies the exact inverse of the model's pre-matrix P G P + μ (I − P) (− σ I for the
-    exact model's sphere, + TAO's shift s) without factorising that 5N × 5N matrix: with
-    the tangent basis T of :meth:`GaussNewtonModel.reduced_operator`,
-
-        y = T R⁻¹ Tᵀ r + (r − T Tᵀ r) / (μ − σ + s),   R = Tᵀ G T (+ μ on absent columns, + s − σ),
-
-    R being 3N × 3N (2N isotropic). So the Krylov iterations are those of the factorised
-    pre-matrix (2 per step), for about a fifth of the factorisation's flops and a third
-    of its memory. R is solved by an inner KSP under the prefix ``<newton prefix>reduced_``
-    (default ``preonly`` + sparse Cholesky, MUMPS where PETSc has it), so
-    ``-tao_nls_reduced_pc_type gamg`` and the like act on R. ``-tao_nls_pc_type
-    cholesky`` (or any other PC) goes back to factorising the pre-matrix itself.
-    """
-
-    #: The Newton model of the solve that runs under each KSP options prefix
-    #: (:meth:`solving`): :meth:`setUp` of a context without one takes it from here, so
-    #: that it does not matter when PETSc makes the context. TAO's ``bntr`` applies the
-    #: options again inside its solve, which makes a new one (with the model given to the
-    #: first context only, that solve failed with PETSc error 101).
-    _solving: dict = {}
-
-    @classmethod
-    @contextmanager
-    def solving(cls, model: GaussNewtonModel, prefix: str):
-        """Within it, a context of this class made for a PC under ``prefix`` uses ``model``."""
-        cls._solving[prefix] = model
-        try:
-            yield
-        finally:
-            cls._solving.pop(prefix, None)
-
-    def __init__(self):
-        self.model, self.ksp, self.work = None, None, None
-
-    def attach(self, model: GaussNewtonModel, prefix: str) -> None:
-        """Use ``model``'s reduced operator; the inner KSP gets ``prefix + 'reduced_'``."""
-        self.model = model
-        comm = model.problem.constraints.comm
-        self.ksp = PETSc.KSP().create(comm)
-        self.ksp.setOptionsPrefix(prefix + "reduced_")
-        self.ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = self.ksp.getPC()
-        if PETSc.Sys.hasExternalPackage("mumps"):
-            pc.setType(PETSc.PC.Type.CHOLESKY)
-            pc.setFactorSolverType("mumps")
-        elif comm.size == 1:
-            pc.setType(PETSc.PC.Type.CHOLESKY)
-        else:
-            self.ksp.setType(PETSc.KSP.Type.CG)
-            pc.setType(PETSc.PC.Type.GAMG)
-        self.ksp.setFromOptions()
-
-    def setUp(self, pc):
-        prefix = None if pc is None else pc.getOptionsPrefix() or ""
-        if self.model is None and prefix in self._solving:
-            self.attach(self._solving[prefix], prefix)
-        if self.model is None:
-            raise RuntimeError("ReducedFactorPC needs the Newton model: use it through "
-                               "ufl_frames.solvers.solve")
-        T, R = self.model.reduced_operator()
-        self.ksp.setOperators(R)
-        self.ksp.setUp()
-        if self.work is None:
-            self.work = (R.createVecRight(), R.createVecRight(), T.createVecLeft())
-
-    def apply(self, pc, r, y):
-        T, R = self.model.reduced_operator()
-        t, s, w = self.work
-        T.multTranspose(r, t)           # t = Tᵀ r
-        self.ksp.solve(t, s)            # s = R⁻¹ t
-        T.mult(t, w)                    # w = T Tᵀ r (the tangent part of r)
-        T.mult(s, y)                    # y = T R⁻¹ Tᵀ r
-        normal = self.model.mu - self.model.sphere + self.model.shift_value
-        y.axpy(1.0 / normal, r)
-        y.axpy(-1.0 / normal, w)
-
-    def destroy(self, pc):
-        if self.ksp is not None:
-            self.ksp.destroy()
-        for v in self.work or ():
-            v.destroy()
-        self.ksp, self.work, self.model = None, None, None

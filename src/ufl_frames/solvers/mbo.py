@@ -65,25 +65,25 @@ def mbo_frame_field(
 
     The constraints' fixed rows (the boundary, and any pinned or prescribed rows) are
     held at the unit frames of their directions; the frame algebra is the constraints'.
+
+    Args:
+        V: the P1 space of the frame coefficients.
+        constraints: the frames' constraints (None: those of ``V``'s boundary).
+        sweeps: diffuse–project iterations per level.
+        levels: how many diffusion times (None: down to the mean edge length).
+        options_prefix: prefix of the KSP's options.
+        monitor: called as ``monitor(level, tau, change)`` after each level.
+
+    Returns:
+        The field q.
     """
     mesh = V.mesh
     if constraints is None:
         constraints = frame_constraints(V)
     algebra = constraints.algebra
     k = algebra.count
-    S, to_blocked = V.sub(0).collapse()
-    row_of = np.asarray(to_blocked, dtype=np.int64) // k  # S dof -> vertex row of V
-    is_fixed = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, bool)
-    is_fixed[constraints.fixed] = True
-    fixed_dofs = np.flatnonzero(is_fixed[row_of]).astype(np.int32)
-
-    q = fem.Function(V, name="q")
+    q, S, row_of, bcs = _fixed_frames(V, constraints)
     rows = q.x.array.reshape(-1, k)
-    rows[constraints.fixed] = algebra.unit_frames(constraints.directions)
-    fixed_values = [fem.Function(S) for _ in range(k)]
-    for j, g in enumerate(fixed_values):
-        g.x.array[:] = rows[row_of, j]
-    bcs = [fem.dirichletbc(g, fixed_dofs) for g in fixed_values]
 
     tau = fem.Constant(mesh, PETSc.ScalarType(1.0))
     u, w = ufl.TrialFunction(S), ufl.TestFunction(S)
@@ -122,20 +122,7 @@ def mbo_frame_field(
                 before = rows.copy()
                 for j in range(k):
                     previous.x.array[:] = before[row_of, j]
-                    with rhs.localForm() as local:
-                        local.set(0.0)
-                    dolfinx.fem.petsc.assemble_vector(rhs, L)
-                    dolfinx.fem.petsc.apply_lifting(rhs, [a], bcs=[[bcs[j]]])
-                    rhs.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-                    dolfinx.fem.petsc.set_bc(rhs, [bcs[j]])
-                    ksp.solve(rhs, component.x.petsc_vec)
-                    if ksp.getConvergedReason() < 0:
-                        raise RuntimeError(
-                            f"MBO diffusion solve failed (KSP reason "
-                            f"{ksp.getConvergedReason()}); try other "
-                            f"-{options_prefix}ksp_type / -{options_prefix}pc_type"
-                        )
-                    component.x.scatter_forward()
+                    _diffusion_solve(ksp, rhs, a, L, bcs[j], component, options_prefix)
                     rows[row_of, j] = component.x.array
                 rows[free] = algebra.closest_unit_isotropic(rows[free])
                 local = float(np.abs(rows - before).max(initial=0.0))
@@ -143,3 +130,64 @@ def mbo_frame_field(
             if monitor is not None:
                 monitor(level, tau_value, change)
     return q
+
+
+def _fixed_frames(V, constraints: FrameConstraints):
+    """The field q with the constraints' fixed rows at the unit frames of their directions
+    (zero elsewhere), and the scalar P1 space the diffusion is solved on.
+
+    Args:
+        V: the P1 space of the frame coefficients.
+        constraints: the frames' constraints.
+
+    Returns:
+        (q, S, row_of, bcs): q; the collapsed scalar space S of ``V.sub(0)``; the vertex
+        row of ``V`` of each dof of S; one Dirichlet condition on S per coefficient,
+        holding the fixed rows at q's values.
+    """
+    algebra = constraints.algebra
+    k = algebra.count
+    S, to_blocked = V.sub(0).collapse()
+    row_of = np.asarray(to_blocked, dtype=np.int64) // k  # S dof -> vertex row of V
+    is_fixed = np.zeros(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, bool)
+    is_fixed[constraints.fixed] = True
+    fixed_dofs = np.flatnonzero(is_fixed[row_of]).astype(np.int32)
+
+    q = fem.Function(V, name="q")
+    rows = q.x.array.reshape(-1, k)
+    rows[constraints.fixed] = algebra.unit_frames(constraints.directions)
+    fixed_values = [fem.Function(S) for _ in range(k)]
+    for j, g in enumerate(fixed_values):
+        g.x.array[:] = rows[row_of, j]
+    bcs = [fem.dirichletbc(g, fixed_dofs) for g in fixed_values]
+    return q, S, row_of, bcs
+
+
+def _diffusion_solve(ksp: PETSc.KSP, rhs: PETSc.Vec, a: fem.Form, L: fem.Form, bc,
+                     component: fem.Function, options_prefix: str) -> None:
+    """One coefficient's implicit diffusion step: ``component`` = A⁻¹ b, b the assembled
+    ``L`` with the fixed rows of ``bc`` lifted and set.
+
+    Args:
+        ksp: the level's KSP (operator A, the matrix of ``a``).
+        rhs: the right-hand side vector, overwritten.
+        a: the bilinear form of A (for the lifting).
+        L: the linear form of b.
+        bc: the coefficient's Dirichlet condition.
+        component: where the solution goes (ghosts updated).
+        options_prefix: the KSP's prefix, for the error message.
+    """
+    with rhs.localForm() as local:
+        local.set(0.0)
+    dolfinx.fem.petsc.assemble_vector(rhs, L)
+    dolfinx.fem.petsc.apply_lifting(rhs, [a], bcs=[[bc]])
+    rhs.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    dolfinx.fem.petsc.set_bc(rhs, [bc])
+    ksp.solve(rhs, component.x.petsc_vec)
+    if ksp.getConvergedReason() < 0:
+        raise RuntimeError(
+            f"MBO diffusion solve failed (KSP reason "
+            f"{ksp.getConvergedReason()}); try other "
+            f"-{options_prefix}ksp_type / -{options_prefix}pc_type"
+        )
+    component.x.scatter_forward()

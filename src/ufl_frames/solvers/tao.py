@@ -57,27 +57,25 @@ gave no value, and ``setFromOptions`` comes last.
 
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass, field
 
 from ufl_frames.bootstrap import init_petsc, petsc_defaults
 
 init_petsc()
 
 import dolfinx.fem.petsc  # noqa: E402, F401
-import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.problem import FrameProblem  # noqa: E402
 from ufl_frames.petsc_options import HESSIANS, TAO_TYPES  # noqa: E402
+from ufl_frames.solvers.active_set import CONSISTENT_ROUNDS, RELEASE_RATIO  # noqa: E402
 from ufl_frames.solvers.hessian import (  # noqa: E402
-    CONSISTENT_ROUNDS,
     DEFAULT_DAMPING,
     HYBRID_SWITCH,
-    RELEASE_RATIO,
     GaussNewtonModel,
-    ReducedFactorPC,
 )
+from ufl_frames.solvers.reduced_pc import ReducedFactorPC  # noqa: E402
+from ufl_frames.solvers.results import SolveResult, SolverState  # noqa: E402
 
 #: TAO defaults (each overridable from the command line). ``-tao_gatol`` and
 #: ``-tao_fmin`` are not here: their defaults depend on the problem (see :func:`solve`).
@@ -149,7 +147,18 @@ def _h_converged(history: list[dict], rtol: float, window: int = H_WINDOW,
     indefinite, whose tiny decreases say nothing of what is left) and the decrease they
     bound (:func:`remaining_decrease`) is at most ``rtol`` H, or at most ``nested_rtol``
     (H_c − H) where the coarser level's H_c = ``coarse_energy`` is given (see
-    :data:`NESTED_RTOL`)."""
+    :data:`NESTED_RTOL`).
+
+    Args:
+        history: the solve's history (:attr:`SolveResult.history`).
+        rtol: ε of the test relative to H (``-frames_h_rtol``).
+        window: Newton steps per window.
+        coarse_energy: the coarser level's H (None: no nested test).
+        nested_rtol: θ of the nested test (``-frames_nested_rtol``).
+
+    Returns:
+        Whether the solve may stop.
+    """
     steps = history[-2 * window:]
     energy = history[-1]["H"] if history else 0.0
     tolerance = rtol * energy
@@ -192,7 +201,7 @@ MUMPS_BLR_TOLERANCE = 1e-8
 def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
     """The default preconditioner of the Newton systems of ``tao_type``: the sparse
     Cholesky factorisation of the model's assembled part in reduced tangent coordinates
-    (:class:`~ufl_frames.solvers.hessian.ReducedFactorPC`: 3 unknowns per vertex instead
+    (:class:`~ufl_frames.solvers.reduced_pc.ReducedFactorPC`: 3 unknowns per vertex instead
     of 5); with ``reduced=False``, of the 5N × 5N pre-matrix itself (MUMPS where PETSc has
     it, which runs in parallel; PETSc's own in serial; GAMG as the last resort).
 
@@ -201,17 +210,24 @@ def newton_pc_options(tao_type: str, comm, reduced: bool = True) -> dict:
     iterations per Newton step grew 107 → 159 → 340 from h = 0.1 to 0.025 on the
     non-isotropic piano, with the factorisation they are 2 at every size
     (``benchmarks/scaling.py``).
+
+    Args:
+        tao_type: the TAO type (no options for types without a Newton KSP).
+        comm: the communicator of the solve.
+        reduced: the reduced PC (else a PC of the pre-matrix itself).
+
+    Returns:
+        The options, under the Newton KSP's prefix.
     """
     prefix = NEWTON_KSP_PREFIX.get(tao_type)
     if prefix is None:
         return {}
     if reduced:
         options = {f"{prefix}pc_type": "python",
-                   f"{prefix}pc_python_type": "ufl_frames.solvers.hessian.ReducedFactorPC"}
+                   f"{prefix}pc_python_type": "ufl_frames.solvers.reduced_pc.ReducedFactorPC"}
         if PETSc.Sys.hasExternalPackage("mumps"):
             # MUMPS's block low-rank factorisation at a 1e-8 threshold: the same steps
-            # and Krylov counts; at 10⁶ triangles on 2 ranks 12.6 s a factorisation
-            # instead of 20.6 s, at 10⁵ as fast as the full-rank one (benchmarks/README)
+            # and Krylov counts, faster factorisations on large meshes (benchmarks/README)
             options[f"{prefix}reduced_mat_mumps_icntl_35"] = "1"
             options[f"{prefix}reduced_mat_mumps_cntl_7"] = str(MUMPS_BLR_TOLERANCE)
         return options
@@ -231,86 +247,6 @@ _REASONS = {
 def converged_reason_name(reason: int) -> str:
     """TAO's converged reason as text (e.g. ``CONVERGED_GRTOL``)."""
     return _REASONS.get(reason, str(reason))
-
-
-@dataclass
-
-
-class SolveResult:
-    """Outcome of :func:`solve`.
-
-    ``history`` has one entry per TAO monitor call that found a new iterate: the
-    initial state, then one per accepted step (rejected trust-region steps, which
-    ``ntr`` reports too, are left out). ``iterations`` counts those steps; it can
-    exceed TAO's own count by one (``nls`` and ``bncg`` take a first step that TAO
-    numbers 0 again). With a Newton model (``nls``, ``ntr``, ...) each entry also has
-    ``ksp_its``: the Krylov iterations spent since the previous entry, and
-    ``factorisations``: how many faces of the aspect bound the Newton step that led there
-    set up its preconditioner for (more than one: the rounds of
-    ``-frames_active_consistent``, see ``GaussNewtonModel._consistent_active_set``).
-    """
-
-    history: list[dict]
-    converged_reason: str
-    iterations: int
-    wall_time_s: float
-
-    @property
-    def H_initial(self) -> float:
-        return self.history[0]["H"]
-
-    @property
-    def H_final(self) -> float:
-        return self.history[-1]["H"]
-
-    @property
-    def E_final(self) -> float:
-        return self.history[-1]["E"]
-
-    @property
-    def krylov_iterations(self) -> list[int] | None:
-        """Krylov iterations per accepted step (None without a Newton model)."""
-        if not self.history or "ksp_its" not in self.history[0]:
-            return None
-        return [entry["ksp_its"] for entry in self.history[1:]]
-
-
-@dataclass
-class SolverState:
-    """A solve at an accepted iterate: what :func:`solve` needs (``resume``) to go on from
-    there as the solve that made it would have. Arrays are this rank's local rows.
-
-    ``rows``: the iterate q (owned rows, (n, 5)); ``history`` as in :class:`SolveResult`
-    so far; ``tao_iterations``: TAO's own count there; ``tao_gnorm0``: the gradient norm
-    TAO's relative test (``-tao_gttol``) divides by; with a Newton model, its damping
-    state (``adaptation``, ``model_gnorm0``), the last step length (``step``), the
-    aspect bound's active set of the last Newton step (``active``) and the rows it held
-    there (``held``; None: none; ``held_only``: they were the whole active set, see
-    :attr:`~ufl_frames.fem.problem.FrameProblem.held_only`), the releases it left to the
-    next step (``released``, see
-    :attr:`~ufl_frames.solvers.hessian.GaussNewtonModel.released`), owned and ghost rows,
-    and whether the model was the exact Hessian there (``exact_hessian``: the hybrid model
-    may have switched).
-    """
-
-    rows: np.ndarray = field(repr=False)
-    history: list[dict]
-    tao_iterations: int
-    tao_gnorm0: float
-    wall_time_s: float
-    step: float = 0.0
-    adaptation: float | None = None
-    model_gnorm0: float | None = None
-    active: np.ndarray | None = field(default=None, repr=False)
-    held: np.ndarray | None = field(default=None, repr=False)
-    held_only: bool = False
-    released: np.ndarray | None = field(default=None, repr=False)
-    exact_hessian: bool | None = None
-
-    @property
-    def iterations(self) -> int:
-        """Accepted steps so far (as :attr:`SolveResult.iterations`)."""
-        return len(self.history) - 1
 
 
 #: TAO types that run on this problem (checked by the CLI before anything is meshed).
@@ -364,6 +300,20 @@ def solve(
     iteration) adds the test on H against the discretisation error: the Newton types
     also stop once the decrease of H still to come is below θ (``coarse_energy`` − H),
     θ = ``-frames_nested_rtol`` (default :data:`NESTED_RTOL`).
+
+    Args:
+        problem: the frame problem; ``problem.q`` is the start and holds the result.
+        max_it: default of ``-tao_max_it``.
+        options_prefix: prefix of the TAO's options.
+        defaults: option defaults over this module's (the command line wins).
+        monitor: called with each history entry.
+        checkpoint: called with the :class:`SolverState` at each accepted iterate.
+        resume: a state to go on from.
+        reference_gradient: a coarser level's |g₀|, a floor of G.
+        coarse_energy: the coarser level's H (finest level of nested iteration).
+
+    Returns:
+        The :class:`SolveResult`.
     """
     opts = PETSc.Options(options_prefix)
     tao_type = opts.getString("tao_type", (defaults or {}).get("tao_type",
@@ -378,8 +328,8 @@ def solve(
     options.setdefault("tao_gatol", gttol * scale)
     options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
-        return _solve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
-                      coarse_energy)
+        return _TaoSolve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
+                         coarse_energy).run()
 
 
 def tao_callbacks(problem: FrameProblem):
@@ -426,60 +376,100 @@ def _released(exc: BaseException) -> BaseException:
     return exc
 
 
-def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
-           resume=None, coarse_energy=None) -> SolveResult:
-    """TAO from ``problem.q``, with the options already in the database (see :func:`solve`).
+class _TaoSolve:
+    """One TAO solve of :func:`solve` from ``problem.q``, with the options already in the
+    database: TAO's callbacks and the state they share (the history, the Krylov count,
+    the first exception), the Newton model, and the solve itself (:meth:`run`).
 
-    Every PETSc object made here (x, g, the model, the TAO) is destroyed on the way out,
-    whether the solve returns or raises, in the same order on every rank (collective).
-    An exception raised by a callback (``monitor`` included) reaches PETSc as an error that
-    aborts ``TaoSolve``; petsc4py then raises a ``PETSc.Error`` (code 101) in its place, so
-    the callbacks keep the first one and it is that exception the caller sees.
+    Every PETSc object :meth:`run` makes (x, g, the model, the TAO) is destroyed on the
+    way out, whether the solve returns or raises, in the same order on every rank
+    (collective). An exception raised by a callback (``monitor`` included) reaches PETSc
+    as an error that aborts ``TaoSolve``; petsc4py then raises a ``PETSc.Error`` (code 101)
+    in its place, so the callbacks keep the first one and it is that exception the caller
+    sees.
+
+    Args:
+        problem: the frame problem; ``problem.q`` is the start and holds the result.
+        tao_type: the TAO type the options give.
+        options_prefix: the prefix of the TAO's options.
+        monitor: called with each history entry (None: none).
+        checkpoint: called with the :class:`SolverState` at each accepted iterate.
+        resume: the state to go on from (None: a new solve).
+        coarse_energy: the coarser level's H (finest level of nested iteration).
     """
-    comm = problem.constraints.comm
-    hessian = None
-    if tao_type in SECOND_ORDER_TYPES:
-        opts = PETSc.Options(options_prefix)
-        hessian = opts.getString("frames_hessian",
-                                 "exact" if problem.constraints.isotropic else "hybrid")
-        if hessian not in HESSIANS:
-            raise ValueError(f"-frames_hessian must be one of {', '.join(HESSIANS)}, "
-                             f"got {hessian!r}")
 
-    errors = []  # the first exception raised inside a callback, re-raised after TAO stops
+    def __init__(self, problem: FrameProblem, tao_type: str, options_prefix: str, monitor,
+                 checkpoint=None, resume: SolverState | None = None,
+                 coarse_energy: float | None = None):
+        self.problem, self.tao_type, self.options_prefix = problem, tao_type, options_prefix
+        self.monitor, self.checkpoint, self.resume = monitor, checkpoint, resume
+        self.coarse_energy = coarse_energy
+        self.comm = problem.constraints.comm
+        self.hessian = None
+        if tao_type in SECOND_ORDER_TYPES:
+            opts = PETSc.Options(options_prefix)
+            self.hessian = opts.getString("frames_hessian",
+                                          "exact" if problem.constraints.isotropic
+                                          else "hybrid")
+            if self.hessian not in HESSIANS:
+                raise ValueError(f"-frames_hessian must be one of {', '.join(HESSIANS)}, "
+                                 f"got {self.hessian!r}")
 
-    def keep(exc: BaseException) -> None:
-        if not errors:
-            errors.append(exc)
+        self.errors = []  # the first exception raised inside a callback, re-raised after TAO
+        self.callbacks = tao_callbacks(problem)  # objective, objective_gradient, update
 
-    def guarded(callback):
+        self.history = [] if resume is None else [dict(entry) for entry in resume.history]
+        # Krylov iterations so far, and at the last history entry
+        self.linear_iterations = [0, 0]
+        self.skip_first = resume is not None  # TAO's first report is the resumed iterate again
+        self.earlier = 0.0 if resume is None else resume.wall_time_s
+
+        self.tao_base = 0 if resume is None else resume.tao_iterations
+        self.stopped_on_h = False  # whether the test on H (H_RTOL) ended the solve
+        self.h_rtol = PETSc.Options(options_prefix).getReal("frames_h_rtol", H_RTOL)
+        self.nested_rtol = PETSc.Options(options_prefix).getReal("frames_nested_rtol",
+                                                                 NESTED_RTOL)
+        self.gnorm0 = None  # what TAO's relative gradient test divides by
+        self.model = None  # the Newton model (second-order types), made by run()
+        self.start = None  # when TAO's solve started
+
+    def keep(self, exc: BaseException) -> None:
+        """Keep ``exc`` where it is the first exception of a callback."""
+        if not self.errors:
+            self.errors.append(exc)
+
+    def guarded(self, callback):
+        """``callback`` keeping the exceptions it raises (:meth:`keep`) before PETSc sees
+        them."""
         def call(*args):
             try:
                 return callback(*args)
             except BaseException as exc:
-                keep(exc)
+                self.keep(exc)
                 raise
 
         return call
 
-    objective, objective_gradient, update = tao_callbacks(problem)
+    def count_linear(self, ksp, it, rnorm):
+        """KSP monitor: counts the Krylov iterations.
 
-    history = [] if resume is None else [dict(entry) for entry in resume.history]
-    linear_iterations = [0, 0]  # Krylov iterations so far, and at the last history entry
-    skip_first = resume is not None  # TAO's first report is the resumed iterate again
-    earlier = 0.0 if resume is None else resume.wall_time_s
-
-    def count_linear(ksp, it, rnorm):
+        Args:
+            ksp: the Newton KSP.
+            it: its iteration number (0: the start of a solve, not counted).
+            rnorm: the residual norm.
+        """
         if it > 0:
-            linear_iterations[0] += 1
+            self.linear_iterations[0] += 1
 
-    def record(tao):
-        nonlocal skip_first
+    def record(self, tao):
+        """TAO monitor: a history entry for each new iterate, then ``checkpoint`` and
+        ``monitor``, and the stopping test on H."""
+        resume, model, history = self.resume, self.model, self.history
         _, f, gnorm, _, step, _ = tao.getSolutionStatus()
         if resume is None and tao.getIterationNumber() == 0:
-            gnorm0[0] = float(gnorm)  # TAO's |g₀|: its last report numbered 0 (see SolveResult)
-        if skip_first:
-            skip_first = False
+            self.gnorm0 = float(gnorm)  # TAO's |g₀|: its last report numbered 0 (see SolveResult)
+        if self.skip_first:
+            self.skip_first = False
             return
         if history and (f, gnorm) == (history[-1]["H"], history[-1]["gnorm"]):
             return  # a rejected trust-region step (ntr monitors those too): x did not move
@@ -488,31 +478,36 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             # This TAO numbers its first step 0 again (bncg does, see SolveResult): it
             # would allow one step more than the iterations left.
             tao.setMaximumIterations(max(tao.getMaximumIterations() - 1, 0))
+        problem = self.problem
         problem.set_from_x(tao.getSolution())
         entry = {"it": len(history), "H": float(f), "E": problem.dirichlet_energy(),
                  "gnorm": float(gnorm), "step": float(step)}
         if model is not None:  # Krylov iterations of the Newton step(s) that led here
-            entry["ksp_its"] = linear_iterations[0] - linear_iterations[1]
-            linear_iterations[1] = linear_iterations[0]
+            entry["ksp_its"] = self.linear_iterations[0] - self.linear_iterations[1]
+            self.linear_iterations[1] = self.linear_iterations[0]
             # faces factorised for it: one, or one per round of the consistent rule
             entry["factorisations"] = max(len(model.bound_rounds), 1)
         history.append(entry)
-        if checkpoint is not None:
-            checkpoint(snapshot(tao, float(step)))
-        if monitor is not None:
-            monitor(entry)
+        if self.checkpoint is not None:
+            self.checkpoint(self.snapshot(tao, float(step)))
+        if self.monitor is not None:
+            self.monitor(entry)
         if model is not None and gnorm > tao.getTolerances()[0] and _h_converged(
-                history, h_rtol, coarse_energy=coarse_energy, nested_rtol=nested_rtol):
+                history, self.h_rtol, coarse_energy=self.coarse_energy,
+                nested_rtol=self.nested_rtol):
             # TAO tests its own criteria after the monitor and keeps a reason set here
-            stopped_on_h[0] = True
+            self.stopped_on_h = True
             tao.setConvergedReason(PETSc.TAO.ConvergedReason.CONVERGED_USER)
 
-    def snapshot(tao, step) -> SolverState:
-        wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    def snapshot(self, tao, step) -> SolverState:
+        """The :class:`SolverState` at TAO's current iterate (collective)."""
+        problem, model = self.problem, self.model
+        wall = self.comm.allreduce(time.perf_counter() - self.start, op=MPI.MAX)
         state = SolverState(
-            rows=problem.rows[: problem.owned].copy(), history=[dict(e) for e in history],
-            tao_iterations=tao_base + tao.getIterationNumber(), tao_gnorm0=tao_gnorm0(),
-            wall_time_s=earlier + wall, step=step)
+            rows=problem.rows[: problem.owned].copy(),
+            history=[dict(e) for e in self.history],
+            tao_iterations=self.tao_base + tao.getIterationNumber(),
+            tao_gnorm0=self.tao_gnorm0(), wall_time_s=self.earlier + wall, step=step)
         if model is not None:
             state.adaptation, state.model_gnorm0 = model.adaptation, model.gnorm0
             state.exact_hessian = model.exact
@@ -522,17 +517,13 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             state.released = None if model.released is None else model.released.copy()
         return state
 
-    tao_base = 0 if resume is None else resume.tao_iterations
-    stopped_on_h = [False]  # whether the test on H (H_RTOL) ended the solve
-    h_rtol = PETSc.Options(options_prefix).getReal("frames_h_rtol", H_RTOL)
-    nested_rtol = PETSc.Options(options_prefix).getReal("frames_nested_rtol", NESTED_RTOL)
-    gnorm0 = [None]  # what TAO's relative gradient test divides by
+    def tao_gnorm0(self) -> float:
+        """The |g₀| TAO's relative gradient test divides by (the original solve's)."""
+        return self.resume.tao_gnorm0 if self.resume is not None else self.gnorm0
 
-    def tao_gnorm0() -> float:
-        return resume.tao_gnorm0 if resume is not None else gnorm0[0]
-
-    with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
-        owned.enter_context(problem.tracking())
+    def initial_iterate(self, owned: ExitStack) -> PETSc.Vec:
+        """x at the start: R(q), or the resumed iterate as it is (owned by ``owned``)."""
+        problem, resume = self.problem, self.resume
         x = dolfinx.fem.petsc.create_vector(problem.q.function_space)
         owned.callback(x.destroy)
         if resume is None:
@@ -543,42 +534,61 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             problem.held = None if resume.held is None else resume.held.copy()
             problem.held_only = resume.held_only and problem.held is not None
         problem.write_x(x, keep=True)
-        g = x.duplicate()
-        owned.callback(g.destroy)
-        model = None
-        if hessian is not None:
-            opts = PETSc.Options(options_prefix)
-            prefix = NEWTON_KSP_PREFIX.get(tao_type)
-            # nls and ntr with the reduced PC need no 5N pre-matrix (the bounded types
-            # take sub-matrices of it: they keep it).
-            lean = (tao_type in ("nls", "ntr")
-                    and opts.getString(f"{prefix}pc_type", "") == "python"
-                    and opts.getString(f"{prefix}pc_python_type", "").endswith(
-                        "ReducedFactorPC"))
-            # -frames_active_consistent (nls, the default): the active set is decided with
-            # the Newton step (GaussNewtonModel._consistent_active_set) instead of held and
-            # released by the gradient; Newton steps that no longer grow with the mesh,
-            # for more factorisations per step (benchmarks/README).
-            consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", True)
-            model = owned.enter_context(GaussNewtonModel(
-                problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
-                damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
-                adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
-                release=opts.getReal("frames_active_release",
-                                     0.0 if consistent else RELEASE_RATIO),
-                consistent=consistent,
-                rounds=opts.getInt("frames_active_rounds", CONSISTENT_ROUNDS),
-                bound_steps=opts.getBool("frames_gn_adapt_bound", True),
-                exact=hessian == "exact", lean=lean,
-                switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
-                        if hessian == "hybrid" else None)))
-            if resume is not None and resume.adaptation is not None:
-                model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
-                             resume.step, exact=resume.exact_hessian,
-                             released=resume.released)
-        tao = PETSc.TAO().create(comm)
+        return x
+
+    def newton_model(self, owned: ExitStack, x: PETSc.Vec) -> GaussNewtonModel | None:
+        """The Newton model of the second-order types from the options, resumed where
+        the solve is (owned by ``owned``); None for the other types."""
+        hessian, tao_type, resume = self.hessian, self.tao_type, self.resume
+        if hessian is None:
+            return None
+        opts = PETSc.Options(self.options_prefix)
+        prefix = NEWTON_KSP_PREFIX.get(tao_type)
+        # nls and ntr with the reduced PC need no 5N pre-matrix (the bounded types
+        # take sub-matrices of it: they keep it).
+        lean = (tao_type in ("nls", "ntr")
+                and opts.getString(f"{prefix}pc_type", "") == "python"
+                and opts.getString(f"{prefix}pc_python_type", "").endswith(
+                    "ReducedFactorPC"))
+        # -frames_active_consistent (nls, the default): the active set is decided with
+        # the Newton step (ActiveSetRules._consistent_active_set) instead of held and
+        # released by the gradient; Newton steps that no longer grow with the mesh,
+        # for more factorisations per step (benchmarks/README).
+        consistent = tao_type == "nls" and opts.getBool("frames_active_consistent", True)
+        model = owned.enter_context(GaussNewtonModel(
+            self.problem, x, damping=opts.getReal("frames_gn_damping", DEFAULT_DAMPING),
+            damping_min=opts.getReal("frames_gn_damping_min", 1e-3),
+            adapt=opts.getBool("frames_gn_adapt", hessian != "exact"),
+            release=opts.getReal("frames_active_release",
+                                 0.0 if consistent else RELEASE_RATIO),
+            consistent=consistent,
+            rounds=opts.getInt("frames_active_rounds", CONSISTENT_ROUNDS),
+            bound_steps=opts.getBool("frames_gn_adapt_bound", True),
+            exact=hessian == "exact", lean=lean,
+            switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
+                    if hessian == "hybrid" else None)))
+        if resume is not None and resume.adaptation is not None:
+            model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
+                         resume.step, exact=resume.exact_hessian,
+                         released=resume.released)
+        return model
+
+    def create_tao(self, owned: ExitStack, x: PETSc.Vec, g: PETSc.Vec) -> PETSc.TAO:
+        """The TAO with the guarded callbacks, its options set.
+
+        Args:
+            owned: the stack that destroys the TAO (and ends the PC's model scope).
+            x: the iterate's vector.
+            g: the gradient's vector.
+
+        Returns:
+            The TAO.
+        """
+        guarded, model = self.guarded, self.model
+        objective, objective_gradient, update = self.callbacks
+        tao = PETSc.TAO().create(self.comm)
         owned.callback(tao.destroy)
-        tao.setOptionsPrefix(options_prefix)
+        tao.setOptionsPrefix(self.options_prefix)
         tao.setSolution(x)
         tao.setObjectiveGradient(guarded(objective_gradient), g)
         tao.setObjective(guarded(objective))  # line-search trials need no gradient
@@ -586,35 +596,48 @@ def _solve(problem, tao_type, options_prefix, monitor, checkpoint=None,
             pre = model.shell if model.lean else model.assembled
             tao.setHessian(guarded(model.update), model.shell, pre)
         tao.setUpdate(guarded(update))
-        tao.setMonitor(guarded(record))
+        tao.setMonitor(guarded(self.record))
         tao.setFromOptions()
         if model is not None:
             # The Newton KSP's ReducedFactorPC (the default PC), whenever PETSc makes it,
             # takes this model; any other PC acts on the model's pre-matrix as it is.
             owned.enter_context(ReducedFactorPC.solving(model,
                                                         tao.getKSP().getOptionsPrefix() or ""))
-            tao.getKSP().setMonitor(guarded(count_linear))
-            model.on_error = keep  # the shell's products, guarded too
-        original_tests = _continue_tests(tao, resume) if resume is not None else None
+            tao.getKSP().setMonitor(guarded(self.count_linear))
+            model.on_error = self.keep  # the shell's products, guarded too
+        return tao
 
-        start = time.perf_counter()
-        try:
-            tao.solve()
-        except PETSc.Error:
-            if not errors:
-                raise
-        if errors:  # outside the except clause: no PETSc.Error chained to it
-            raise _released(errors.pop())
-        wall = earlier + comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
-        problem.set_from_x(tao.getSolution())
-        reason = converged_reason_name(tao.getConvergedReason())
-        if stopped_on_h[0] and reason == "CONVERGED_USER":
-            reason = H_RTOL_REASON
-        if original_tests is not None:
-            reason = _original_reason(original_tests, reason, history[-1]["gnorm"])
-    iterations = len(history) - 1  # TAO's own count restarts in some types (bncg)
-    return SolveResult(history=history, converged_reason=reason, iterations=iterations,
-                       wall_time_s=wall)
+    def run(self) -> SolveResult:
+        """Make x, g, the model and the TAO, solve, destroy them; the result."""
+        problem, comm = self.problem, self.comm
+        with ExitStack() as owned:  # destroys in reverse order of creation, on every exit
+            owned.enter_context(problem.tracking())
+            x = self.initial_iterate(owned)
+            g = x.duplicate()
+            owned.callback(g.destroy)
+            self.model = self.newton_model(owned, x)
+            tao = self.create_tao(owned, x, g)
+            original_tests = (_continue_tests(tao, self.resume) if self.resume is not None
+                              else None)
+
+            self.start = time.perf_counter()
+            try:
+                tao.solve()
+            except PETSc.Error:
+                if not self.errors:
+                    raise
+            if self.errors:  # outside the except clause: no PETSc.Error chained to it
+                raise _released(self.errors.pop())
+            wall = self.earlier + comm.allreduce(time.perf_counter() - self.start, op=MPI.MAX)
+            problem.set_from_x(tao.getSolution())
+            reason = converged_reason_name(tao.getConvergedReason())
+            if self.stopped_on_h and reason == "CONVERGED_USER":
+                reason = H_RTOL_REASON
+            if original_tests is not None:
+                reason = _original_reason(original_tests, reason, self.history[-1]["gnorm"])
+        iterations = len(self.history) - 1  # TAO's own count restarts in some types (bncg)
+        return SolveResult(history=self.history, converged_reason=reason,
+                           iterations=iterations, wall_time_s=wall)
 
 
 def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
@@ -633,7 +656,16 @@ def _continue_tests(tao, resume: SolverState) -> tuple[float, float]:
 
 def _original_reason(tests: tuple[float, float], reason: str, gnorm: float) -> str:
     """The reason the original tests give where :func:`_continue_tests` rewrote them: a
-    gradient below the absolute tolerance only by the rewritten gttol test is GTTOL."""
+    gradient below the absolute tolerance only by the rewritten gttol test is GTTOL.
+
+    Args:
+        tests: the original (gatol, gttol) :func:`_continue_tests` returned.
+        reason: TAO's reason, as text.
+        gnorm: the last iterate's gradient norm.
+
+    Returns:
+        The reason, as text.
+    """
     gatol, gttol = tests
     if reason == "CONVERGED_GATOL" and gnorm > gatol and gttol > 0:
         return "CONVERGED_GTTOL"
