@@ -12,10 +12,8 @@ STAMP   := $(VENV)/.installed
 VENV_PURE  := .venv-pure
 PY_PURE    := $(VENV_PURE)/bin/python
 STAMP_PURE := $(VENV_PURE)/.installed
-PURE_TESTS := tests/test_odeco.py tests/test_bracket.py tests/test_aspect.py tests/test_singularities.py \
-              tests/test_algebra.py \
-              tests/test_param.py tests/test_quads.py tests/test_quad_measures.py \
-              tests/test_scaling_report.py
+# The pure layer is selected by folder: the tests of the packages that need no DOLFINx.
+PURE_TESTS := tests/frames2d tests/param tests/quads tests/benchmarks
 # One BLAS thread per process: the suite runs two MPI ranks on small dense problems.
 export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1

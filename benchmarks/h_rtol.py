@@ -7,7 +7,7 @@ solve, and what they cost.
 
 Each case is solved once with the tests off (``-frames_h_rtol 0 -frames_nested_rtol 0``: to
 TAO's gradient test).
-The test only ends a solve, it changes no step (``tests/test_h_rtol.py`` checks that the
+The test only ends a solve, it changes no step (``tests/solvers/test_h_rtol.py`` checks that the
 history up to the stop is the full one), so replaying it on the recorded history gives,
 for every tolerance, the step it would stop at and the H it would end with. Printed per
 case and level: the steps to the gradient test, and per tolerance the stopping step and

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-DEMO_DIR = Path(__file__).resolve().parent.parent / "demos"
+DEMO_DIR = Path(__file__).resolve().parents[2] / "demos"
 DEMOS = sorted(DEMO_DIR.glob("demo_*.py"))
 
 #: The PNG files each demo must write into out_<demo>/.

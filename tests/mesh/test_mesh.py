@@ -32,7 +32,7 @@ from ufl_frames.mesh import (  # noqa: E402
 )
 from ufl_frames.mesh.builtin import PIANO_CONCAVE_RADIUS, PIANO_CONVEX_RADIUS  # noqa: E402
 
-MESHES = Path(__file__).resolve().parents[1] / "meshes"
+MESHES = Path(__file__).resolve().parents[2] / "meshes"
 COMM = MPI.COMM_WORLD
 H = 0.1  # coarse: the suite must stay fast
 

@@ -11,7 +11,7 @@ import pytest
 
 pytestmark = pytest.mark.serial  # one process: nothing here is parallel
 
-SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "scaling.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "scaling.py"
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ import pytest
 
 from ufl_frames.frames2d import bracket, odeco
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 SQRT2 = np.sqrt(2.0)
 
 

@@ -9,36 +9,10 @@ field turning by a quarter around a point has one singular vertex, cut to the bo
 
 import numpy as np
 import pytest
+from planar_meshes import annulus, annulus_field, grid
 
 from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, measures, seamless
-
-
-def grid(nx, ny, x0=0.0, x1=1.0, y0=0.0, y1=1.0):
-    """Structured right triangles on a rectangle (alternating diagonals)."""
-    xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    x = np.stack([X.ravel(), Y.ravel()], axis=1)
-    idx = np.arange(x.shape[0]).reshape(nx + 1, ny + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    flip = ((np.arange(nx)[:, None] + np.arange(ny)[None, :]) % 2).astype(bool)
-    t1 = np.where(flip[..., None], np.stack([a, b, d], -1), np.stack([a, b, c], -1))
-    t2 = np.where(flip[..., None], np.stack([b, c, d], -1), np.stack([a, c, d], -1))
-    return x, np.concatenate([t1.reshape(-1, 3), t2.reshape(-1, 3)])
-
-
-def annulus(nr, nt, r0=0.5, r1=1.0):
-    """The annulus as a polar grid, periodic in θ."""
-    r = np.linspace(r0, r1, nr + 1)
-    t = np.linspace(0, 2 * np.pi, nt, endpoint=False)
-    R, T = np.meshgrid(r, t, indexing="ij")
-    x = np.stack([(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel()], axis=1)
-    idx = np.arange(x.shape[0]).reshape(nr + 1, nt)
-    a, b = idx[:-1], idx[1:]
-    c, d = np.roll(b, -1, axis=1), np.roll(a, -1, axis=1)
-    cells = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                            np.stack([a, c, d], -1).reshape(-1, 3)])
-    return x, cells
 
 
 def test_constant_field_integrates_to_an_affine_map():
@@ -56,11 +30,6 @@ def test_constant_field_integrates_to_an_affine_map():
     fit, *_ = np.linalg.lstsq(np.c_[xy, np.ones(len(xy))], uv, rcond=None)
     assert np.allclose(np.abs(fit[:2]), [[2.0, 0.0], [0.0, 4.0]], atol=1e-10) or \
         np.allclose(np.abs(fit[:2]), [[0.0, 2.0], [4.0, 0.0]], atol=1e-10)
-
-
-def annulus_field(x):
-    r, theta = np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])
-    return odeco.frames_to_q(np.stack([r, r], axis=1), theta)
 
 
 @pytest.mark.parametrize("n", [8])

@@ -13,7 +13,7 @@ from the extraction: conformity, orientation, area.
 
 import numpy as np
 import pytest
-from test_param import annulus, annulus_field, grid
+from planar_meshes import annulus, annulus_field, grid
 
 from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, quantise, seamless
