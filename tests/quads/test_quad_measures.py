@@ -23,7 +23,13 @@ import numpy as np
 import pytest
 
 from ufl_frames.quads import measures
-from ufl_frames.quads.measures import check_quad_mesh, quad_quality, scaled_jacobians
+from ufl_frames.quads.measures import (
+    boundary_length,
+    check_quad_mesh,
+    euler_characteristic,
+    quad_quality,
+    scaled_jacobians,
+)
 
 
 def grid(nx, ny, width=2.0, height=1.0):
@@ -493,3 +499,37 @@ def test_msh_read_back_by_dolfinx(tmp_path):
     perimeter = comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ds(BOUNDARY_TAG))),
                                op=MPI.SUM)
     assert perimeter == pytest.approx(6.0, rel=1e-12)
+
+
+def test_euler_characteristic_counts_holes_and_a_slit_may_have_twins():
+    """A 3 × 3 grid is a disk (χ = 1); without its middle quad it has a hole (χ = 0). The
+    2 × 2 grid cut open from its left side's midpoint to its centre (the points there
+    doubled, but for the centre: a slit) is still a disk, and its twin points are
+    accepted only when slits are allowed."""
+    x, q = grid(3, 3)
+    assert euler_characteristic(q) == 1
+    assert euler_characteristic(np.delete(q, 4, axis=0)) == 0
+    x, q = grid(2, 2)
+    # the left side's midpoint is point 1 (point 3 ix + iy), the centre 4: the quad above
+    # the slit (corners 1, 4, 5, 2) takes a twin of point 1
+    twin = len(x)
+    x2 = np.concatenate([x, x[1][None]])
+    q2 = q.copy()
+    above = [i for i in range(4) if {1, 4, 5} <= set(q[i].tolist())][0]
+    q2[above] = np.where(q[above] == 1, twin, q[above])
+    assert euler_characteristic(q2) == 1
+    assert check_quad_mesh(x2, q2, slits=True) == []
+    _one_problem(check_quad_mesh(x2, q2), "coincide")
+
+
+def test_boundary_length_grows_where_quads_are_missing():
+    """The 3 × 3 grid on [0, 2] × [0, 1] has the rectangle's perimeter 6; without a
+    corner quad (an edge of 2/3 by 1/3) the perimeter is unchanged, without the middle
+    quad of the bottom row it grows by two sides of 1/3, without the centre by its
+    whole perimeter 2 (2/3 + 1/3)."""
+    x, q = grid(3, 3)
+    assert boundary_length(x, q) == pytest.approx(6.0, rel=1e-14)
+    corner = [i for i in range(9) if 0 in q[i]][0]
+    assert boundary_length(x, np.delete(q, corner, axis=0)) == pytest.approx(6.0, rel=1e-14)
+    assert boundary_length(x, np.delete(q, 3, axis=0)) == pytest.approx(6 + 2 / 3, rel=1e-14)
+    assert boundary_length(x, np.delete(q, 4, axis=0)) == pytest.approx(8.0, rel=1e-14)

@@ -157,6 +157,28 @@ def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
     return QuadMeshed(quality=quality, mesh=kept)
 
 
+def _has_slits(mesh) -> bool:
+    """Whether the triangle mesh was cut open along a slit: two of its boundary vertices
+    at one place."""
+    from scipy.spatial import cKDTree
+
+    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
+    scale = float(np.ptp(mesh.x, axis=0).max())
+    return len(cKDTree(mesh.x[boundary]).query_pairs(1e-12 * scale)) > 0
+
+
+def _perimeter(mesh) -> float:
+    """The length of the triangle mesh's boundary."""
+    e = mesh.edges[mesh.faces[:, 1] < 0]
+    return float(np.linalg.norm(mesh.x[e[:, 1]] - mesh.x[e[:, 0]], axis=1).sum())
+
+
+def _euler(mesh) -> int:
+    """V − E + F of the (uncut) triangle mesh of the cut mesh ``mesh``."""
+    used = np.unique(mesh.cells)
+    return int(used.size - mesh.edges.shape[0] + mesh.cells.shape[0])
+
+
 def _quad_mesh(mesh, size: float):
     """(the quad mesh, its measures) of the cut mesh ``mesh`` at quad size ``size``."""
     from ufl_frames.param import measures as param_measures
@@ -175,7 +197,17 @@ def _quad_mesh(mesh, size: float):
                                                               quad_mesh.quads))
     improved = time.perf_counter()
     area = float(grid_map.param.area.sum())
-    problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads)
+    problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads,
+                                        slits=_has_slits(mesh))
+    euler, expected = measures.euler_characteristic(quad_mesh.quads), _euler(mesh)
+    if euler != expected:  # a hole the shape does not have, or a hole closed
+        problems.append(f"the quads have Euler characteristic {euler}, the shape {expected}")
+    # the quads' boundary runs along chords of the triangles' boundary: never longer
+    # unless quads are missing (a hole that opens onto the boundary or a slit)
+    length, bound = measures.boundary_length(quad_mesh.points, quad_mesh.quads), _perimeter(mesh)
+    if length > bound * (1 + 1e-9):
+        problems.append(f"the quads' boundary is {length / bound - 1:.2%} longer than the "
+                        "shape's (quads are missing)")
     if problems:  # the map is valid, but its grid too coarse for the shape
         raise ValueError(f"at quad size {size:.3g} the quads are not a valid mesh "
                          f"({problems[0]}); take a smaller quad size")

@@ -28,7 +28,9 @@ import numpy as np
 
 __all__ = [
     "QUALITY_KEYS",
+    "boundary_length",
     "check_quad_mesh",
+    "euler_characteristic",
     "quad_quality",
     "scaled_jacobians",
     "vertex_valence",
@@ -112,6 +114,24 @@ def _corner_angles(x: np.ndarray, q: np.ndarray) -> np.ndarray:
                   2 * np.pi)
 
 
+def euler_characteristic(quads) -> int:
+    """χ = V − E + F of the quad mesh (the points its quads use, their distinct edges, the
+    quads): 1 for a disk, 1 − h with h holes, summed over components."""
+    q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    edges = np.sort(np.stack([q, np.roll(q, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    return int(np.unique(q).size - np.unique(edges, axis=0).shape[0] + q.shape[0])
+
+
+def boundary_length(points, quads) -> float:
+    """The length of the quad mesh's boundary: its edges that lie in one quad."""
+    x = np.asarray(points, dtype=np.float64)[:, :2]
+    q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    edges = np.sort(np.stack([q, np.roll(q, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    once = unique[counts == 1]
+    return float(np.linalg.norm(x[once[:, 1]] - x[once[:, 0]], axis=1).sum())
+
+
 def vertex_valence(points, quads) -> dict:
     """Per point: ``valence`` (edges at it), ``expected`` (its regular valence, module
     docstring; 0 where no quad uses it), ``boundary`` (bool: on an edge of one quad) and
@@ -187,7 +207,8 @@ def _some(indices, fmt, limit: int = 3) -> str:
     return ", ".join(items) + (f" and {more} more" if more > 0 else "")
 
 
-def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9) -> list[str]:
+def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9,
+                    slits: bool = False) -> list[str]:
     """What makes the quad mesh invalid, one line each; an empty list for a valid mesh.
 
     Checked: finite coordinates; distinct corners in every quad; every edge in one quad
@@ -196,8 +217,9 @@ def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9
     (not inverted, not degenerate, not reflex), and the two quads at an interior edge
     crossing it in opposite directions (consistent orientation; also finds duplicated
     quads); the quads at every vertex one fan (manifold); no point unused, none
-    duplicated (but for two boundary points: the sides of a slit); the total area within
-    ``rtol`` of ``area`` when given.
+    duplicated (with ``slits``, two boundary points may coincide: the two sides of a
+    slit, a domain cut open along a curve); the total area within ``rtol`` of ``area``
+    when given.
     """
     try:
         x, q = _arrays(points, quads)
@@ -247,9 +269,10 @@ def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9
     if unused.size:
         problems.append(f"{unused.size} points are in no quad: "
                         + _some(unused, lambda i: f"point {i}"))
-    on_boundary = np.zeros(n, dtype=bool)
-    on_boundary[directed[counts[inverse] == 1].ravel()] = True
-    problems += _duplicates(x, float(np.ptp(x, axis=0).max()), on_boundary)
+    twins = np.zeros(n, dtype=bool)  # points that may have a twin: a slit's sides
+    if slits:
+        twins[directed[counts[inverse] == 1].ravel()] = True
+    problems += _duplicates(x, float(np.ptp(x, axis=0).max()), twins)
     if area is not None:
         total = float(area_q.sum())
         if not abs(total - area) <= rtol * abs(area):
@@ -314,15 +337,15 @@ def _non_manifold(q: np.ndarray, n: int) -> list[str]:
             + _some(bad, lambda i: f"point {i} ({per_vertex[i]} fans)")]
 
 
-def _duplicates(x: np.ndarray, scale: float, on_boundary: np.ndarray) -> list[str]:
-    """Distinct points at the same place, but for two boundary points (the two sides of
-    a slit: a mesh cut open along a curve has its points there twice)."""
+def _duplicates(x: np.ndarray, scale: float, twins: np.ndarray) -> list[str]:
+    """Distinct points at the same place, but for two ``twins`` (the boundary points of
+    the two sides of a slit)."""
     from scipy.spatial import cKDTree
 
     pairs = cKDTree(x).query_pairs(GEOMETRIC_TOLERANCE * max(scale, 1e-300),
                                    output_type="ndarray")
     if len(pairs):
-        pairs = pairs[~(on_boundary[pairs[:, 0]] & on_boundary[pairs[:, 1]])]
+        pairs = pairs[~(twins[pairs[:, 0]] & twins[pairs[:, 1]])]
     if not len(pairs):
         return []
     return [f"{len(pairs)} pairs of points coincide: "
