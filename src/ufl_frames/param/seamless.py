@@ -319,9 +319,6 @@ def invalid(p: Parametrisation) -> np.ndarray:
     return folded(p) | miswound(p)[p.mesh.cells].any(axis=1)
 
 
-#: Re-weighted misfit rows up to which a weighted solve updates the one factorisation
-#: (:class:`SeamlessSystem`); beyond, it factorises the weighted matrix.
-WOODBURY_ROWS = 1000
 
 
 def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarray:
@@ -336,6 +333,13 @@ def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarra
     Z = lu.solve(F_fixed.T.toarray())
     mu = np.linalg.solve(F_fixed @ Z, F_fixed @ y0 - d)
     return y0 - Z @ mu
+
+
+#: Re-weighted misfit rows up to which a weighted solve updates the one factorisation
+#: (:class:`SeamlessSystem`): each costs a back-substitution, and on 10⁵ triangles about
+#: a hundred of them cost as much as a factorisation; beyond, the weighted matrix is
+#: factorised anew.
+WOODBURY_ROWS = 96
 
 
 class SeamlessSystem:
@@ -376,7 +380,7 @@ class SeamlessSystem:
         rows = np.zeros(0, dtype=np.int64)
         if weight is not None:
             rows = np.flatnonzero(np.repeat(weight, 4) != 1.0)
-        if rows.size > min(WOODBURY_ROWS, self.y0.size // 4):  # a factorisation is cheaper
+        if rows.size > WOODBURY_ROWS:  # a factorisation is cheaper
             return weighted_solve(self.AT, self.b, weight, F, d)
         if rows.size:
             A_R = self.AT[rows]
