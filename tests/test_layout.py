@@ -1,0 +1,219 @@
+"""The T-mesh of a seamless map, its patches, integer arc lengths and quads
+(``ufl_frames.quads.layout``), pure NumPy/SciPy.
+
+Truth: a constant frame integrates to an affine map on any mesh (exactly), so on a
+rectangle there is no trace, one patch, and the quads are the exact round(2 s) × round(s)
+grid; on an L-shape the concave corner continues its two boundary curves inward (two
+traces), three square patches, the quads again the exact grid (also where the traces run
+along mesh edges through vertices). The annulus field (r e_r, r e_θ): no singularity and no
+corner, so one trace across the inner loop makes it one patch, n_θ × n_r quads on circles.
+Fields with singular vertices: 4 − turn separatrices each, the patches counted by Euler's
+formula (nodes − arcs + patches = 1 on a disk), the singular vertex a quad vertex of
+valence 4 − turn. Validity is checked by :func:`ufl_frames.quads.measures.check_quad_mesh`,
+written apart from the layout: conformity, orientation, area.
+"""
+
+import time
+
+import numpy as np
+import pytest
+from test_param import annulus, annulus_field, grid
+from test_quads import constant_field, pair_field, wobble
+
+from ufl_frames.frames2d import odeco
+from ufl_frames.param import cut, seamless
+from ufl_frames.quads import layout
+from ufl_frames.quads.measures import check_quad_mesh, quad_quality
+
+
+def l_shape(n, amount=0.0):
+    """[0, 2]² without [1, 2]², structured (n per unit), interior vertices wobbled."""
+    x, cells = grid(2 * n, 2 * n, 0, 2, 0, 2)
+    cells = cells[~(x[cells].mean(axis=1) > 1).all(axis=1)]
+    used = np.unique(cells)
+    remap = np.full(x.shape[0], -1)
+    remap[used] = np.arange(used.size)
+    x, cells = x[used], remap[cells]
+    if amount:
+        inside = ((x > 0) & (x < 2)).all(axis=1) & ~((x >= 1).all(axis=1)
+                                                    & ((x[:, 0] == 1) | (x[:, 1] == 1)))
+        x = x + inside[:, None] * amount * np.sin(7 * x[:, ::-1]) * x * (2 - x) / 4
+    return x, cells
+
+
+def grid_points(points, spacing):
+    """Largest distance of the points to the lattice of the given spacings."""
+    k = points / spacing
+    return float(np.abs(k - np.rint(k)).max())
+
+
+@pytest.mark.parametrize("scale, mesh_wobble", [(3.3, 0.05), (4.0, 0.0), (2.6, 0.02)],
+                         ids=["generic", "lines-through-vertices", "coarse"])
+def test_rectangle_is_one_patch_and_the_exact_grid(scale, mesh_wobble):
+    x, cells = grid(8, 6, 0, 2, 0, 1)
+    x = wobble(x, mesh_wobble)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    quads, lay, n = layout.quads_of_map(seamless.integrate(mesh, scale))
+    assert lay.traces == [] and len(lay.patches) == 1 and len(lay.arcs) == 4
+    W, H = int(np.rint(2 * scale)), int(np.rint(scale))
+    assert sorted(n.tolist()) == sorted([W, W, H, H])
+    assert quads.num_quads == W * H
+    assert check_quad_mesh(quads.points, quads.quads, area=2.0, rtol=1e-9) == []
+    assert grid_points(quads.points, np.array([2 / W, 1 / H])) < 1e-5  # fixed point: 2⁻²⁰
+    assert np.unique(np.rint(quads.points * [W / 2, H]), axis=0).shape[0] == (W + 1) * (H + 1)
+    quality = quad_quality(quads.points, quads.quads)
+    assert quality["irregular_vertices"] == 0 and quality["min_sj"] > 1 - 1e-5
+
+
+@pytest.mark.parametrize("amount", [0.0, 0.1], ids=["along-edges", "generic"])
+def test_l_shape_corner_gives_two_traces_and_three_patches(amount):
+    x, cells = l_shape(6, amount)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    scale = 3.3
+    quads, lay, n = layout.quads_of_map(seamless.integrate(mesh, scale))
+    corner = int(np.flatnonzero(np.all(x == 1.0, axis=1))[0])
+    assert [t.start for t in lay.traces] == [("v", corner)] * 2
+    assert all(t.stop == "boundary" for t in lay.traces)
+    assert len(lay.patches) == 3 and len(lay.arcs) == 10 and len(lay.nodes) == 8
+    assert len(lay.nodes) - len(lay.arcs) + len(lay.patches) == 1
+    assert n.tolist() == [3] * 10  # every arc 3.3 long
+    assert quads.num_quads == 27
+    assert check_quad_mesh(quads.points, quads.quads, area=3.0, rtol=1e-9) == []
+    assert grid_points(quads.points, 1 / 3) < 1e-5
+    quality = quad_quality(quads.points, quads.quads)
+    assert quality["interior_valence"] == {"4": 16} and quality["min_sj"] > 1 - 1e-5
+
+
+@pytest.mark.parametrize("scale", [2.0, 4.0, 6.0])
+def test_annulus_is_one_patch_across_the_seam(scale):
+    r0, r1 = 0.5, 1.0
+    x, cells = annulus(12, 72, r0, r1)
+    mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    param = seamless.integrate(mesh, scale)
+    quads, lay, n = layout.quads_of_map(param)
+    assert len(lay.traces) == 1 and len(lay.patches) == 1 and len(lay.arcs) == 3
+    radial = lay.traces[0]
+    assert radial.stop == "boundary"
+    n_r = int(np.rint(scale * np.log(r1 / r0)))
+    around = [a.length for a in lay.arcs if a.boundary]
+    n_theta = int(np.rint(around[0]))
+    assert around == pytest.approx([2 * np.pi * scale] * 2, rel=0.02)
+    assert sorted(n.tolist()) == [n_r, n_theta, n_theta]
+    assert quads.num_quads == n_theta * n_r
+    assert check_quad_mesh(quads.points, quads.quads) == []
+    quality = quad_quality(quads.points, quads.quads)
+    assert quality["irregular_vertices"] == 0
+    assert quality["interior_valence"] == ({"4": n_theta * (n_r - 1)} if n_r > 1 else {})
+    r = np.hypot(*quads.points.T)
+    k = np.log(r / r0) / np.log(r1 / r0) * n_r
+    assert np.abs(k - np.rint(k)).max() < 0.05
+    assert np.bincount(np.rint(k).astype(int)).tolist() == [n_theta] * (n_r + 1)
+
+
+def quarter_field(x, centre=(-0.07, -0.13)):
+    theta = np.arctan2(x[:, 1] - centre[1], x[:, 0] - centre[0])
+    return odeco.frames_to_q(np.ones((x.shape[0], 2)), theta / 4)
+
+
+def check_singular_layout(mesh, lay, quads, area):
+    """Separatrices, Euler's formula, the singular vertices as quad vertices of valence
+    4 − turn, validity."""
+    for v, turn in zip(mesh.singular, mesh.turns, strict=True):
+        leaving = [t for t in lay.traces if t.start == ("v", int(v))]
+        arriving = [t for t in lay.traces if t.end == ("v", int(v)) and t.stop == "singular"]
+        assert len(leaving) + len(arriving) == 4 - turn
+    assert len(lay.nodes) - len(lay.arcs) + len(lay.patches) == 1
+    assert check_quad_mesh(quads.points, quads.quads, area=area, rtol=0.01) == []
+    valence = np.zeros(quads.points.shape[0], dtype=int)
+    edges = np.unique(np.sort(np.stack([quads.quads, np.roll(quads.quads, -1, axis=1)],
+                                       axis=-1).reshape(-1, 2), axis=1), axis=0)
+    np.add.at(valence, edges.ravel(), 1)
+    for v, turn in zip(mesh.singular, mesh.turns, strict=True):
+        at = np.flatnonzero(np.linalg.norm(quads.points - mesh.x[v], axis=1) < 1e-12)
+        assert at.size == 1 and valence[at[0]] == 4 - turn
+
+
+@pytest.mark.parametrize("scale", [3.0, 6.0])
+def test_a_quarter_singularity_has_three_separatrices(scale):
+    x, cells = grid(16, 16, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, quarter_field(x))
+    assert mesh.turns.tolist() == [1]
+    quads, lay, n = layout.quads_of_map(seamless.integrate(mesh, scale))
+    assert sum(t.start == ("v", int(mesh.singular[0])) for t in lay.traces) == 3
+    check_singular_layout(mesh, lay, quads, 4.0)
+    interior = quad_quality(quads.points, quads.quads)["interior_valence"]
+    assert interior.get("3") == 1 and set(interior) <= {"3", "4"}
+    # per patch, opposite sides have equal integer lengths, every arc at least 1
+    assert n.min() >= 1
+    for sides in lay.patches:
+        total = [sum(n[h // 2] for h in side) for side in sides]
+        assert total[0] == total[2] and total[1] == total[3]
+
+
+@pytest.mark.parametrize("scale", [1.0, 2.0, 4.0])
+def test_a_close_pair_gives_valid_quads_without_repair(scale):
+    """The ± pair a quarter of a quad apart that greedy rounding folds at s = 1
+    (test_quads repairs it): on the T-mesh the quads are valid by construction."""
+    x, cells = grid(20, 20, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, pair_field(x, (-0.11, 0.013), (0.12, 0.007)))
+    quads, lay, _ = layout.quads_of_map(seamless.integrate(mesh, scale))
+    check_singular_layout(mesh, lay, quads, 4.0)
+    interior = quad_quality(quads.points, quads.quads)["interior_valence"]
+    assert interior.get("3") == 1 and interior.get("5") == 1
+
+
+def test_fixed_point_charts_are_exact():
+    """Every seam's transition is the same at both ends of each cut edge, in integers,
+    and the values are the map's to 2⁻²⁰."""
+    x, cells = grid(16, 16, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, quarter_field(x))
+    param = seamless.integrate(mesh, 3.0)
+    P = layout.fixed_point(param)
+    assert np.abs(P / layout.UNIT - (param.uv - param.uv[0])).max() < 2.0**-18
+    for e in mesh.cut:
+        f, g = mesh.faces[e]
+        rot = seamless.quarter_turn(mesh.jump[e]).astype(np.int64)
+        shifts = [P[seamless.wedge_of(mesh, g, v)] - rot @ P[seamless.wedge_of(mesh, f, v)]
+                  for v in mesh.edges[e]]
+        assert np.array_equal(shifts[0], shifts[1])
+
+
+def test_a_folded_map_is_reported():
+    """A trace that enters a folded triangle stops, and the layout says so."""
+    x, cells = l_shape(6)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    param = seamless.integrate(mesh, 3.3)
+    uv = param.uv.copy()
+    v = int(np.flatnonzero(np.all(np.isclose(x, [0.5, 1.0]), axis=1))[0])  # on a trace
+    uv[mesh.corners[mesh.cells == v]] += [1.0, 0.0]  # past its neighbour at U = 2.2
+    folded = seamless.parametrisation(mesh, uv, 3.3)
+    assert seamless.folded(folded).any()
+    with pytest.raises(layout.LayoutError, match="fold"):
+        layout.layout(folded)
+    # a fold off the traces does not stop them; the layout lists it
+    uv = param.uv.copy()
+    v = int(np.flatnonzero(np.all(np.isclose(x, [0.5, 1.0 + 1 / 6]), axis=1))[0])
+    uv[mesh.corners[mesh.cells == v]] += [0.0, -1.2]
+    folded = seamless.parametrisation(mesh, uv, 3.3)
+    lay = layout.layout(folded)
+    assert np.array_equal(lay.folded, np.flatnonzero(seamless.folded(folded)))
+
+
+def test_a_trace_that_does_not_end_is_reported():
+    x, cells = annulus(8, 48)
+    mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    param = seamless.integrate(mesh, 3.0)
+    tracer = layout.Motorcycles(param, max_steps=3)
+    with pytest.raises(layout.LayoutError, match="does not end"):
+        layout.layout(param, tracer)
+
+
+def test_larger_map_is_fast():
+    """A 60 × 60 mesh (7200 triangles) with a ± pair at s = 8: under a few seconds."""
+    x, cells = grid(60, 60, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, pair_field(x, (-0.31, 0.013), (0.32, 0.107)))
+    param = seamless.integrate(mesh, 8.0)
+    start = time.perf_counter()
+    quads, lay, _ = layout.quads_of_map(param)
+    assert time.perf_counter() - start < 10.0
+    check_singular_layout(mesh, lay, quads, 4.0)
