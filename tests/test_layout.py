@@ -217,3 +217,35 @@ def test_larger_map_is_fast():
     quads, lay, _ = layout.quads_of_map(param)
     assert time.perf_counter() - start < 10.0
     check_singular_layout(mesh, lay, quads, 4.0)
+
+
+def slit(nx=8, ny=4):
+    """[0, 2] × [0, 1] with a slit along y = 1/2 from x = 0 to 1 (its points doubled)."""
+    x, cells = grid(nx, ny, 0, 2, 0, 1)
+    below = x[cells].mean(axis=1)[:, 1] < 0.5
+    on = np.flatnonzero(np.isclose(x[:, 1], 0.5) & (x[:, 0] < 1 - 1e-9))
+    copy = np.full(x.shape[0], -1)
+    copy[on] = x.shape[0] + np.arange(on.size)
+    lower = cells[below]
+    cells = cells.copy()
+    cells[below] = np.where(copy[lower] >= 0, copy[lower], lower)
+    return np.concatenate([x, x[on]]), cells
+
+
+def test_a_slit_tip_continues_three_ways():
+    """The slit's tip is a boundary vertex whose fan turns by 360°: three traces (on
+    along the slit's line, and both ways across it), four patches of 3 × 2 quads; the
+    slit's two sides are boundary with their own points (the only coinciding ones)."""
+    x, cells = slit()
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    quads, lay, n = layout.quads_of_map(seamless.integrate(mesh, 3.3))
+    tip = int(np.flatnonzero(np.all(np.isclose(x, [1.0, 0.5]), axis=1))[0])
+    assert [t.start for t in lay.traces] == [("v", tip)] * 3
+    assert len(lay.patches) == 4 and quads.num_quads == 24
+    problems = check_quad_mesh(quads.points, quads.quads, area=2.0, rtol=1e-6)
+    assert len(problems) == 1 and problems[0].startswith("3 pairs of points coincide")
+    distance = np.linalg.norm(quads.points[:, None] - quads.points[None], axis=2)
+    i, j = np.nonzero(np.triu(distance < 1e-9, k=1))
+    assert i.size == 3
+    assert np.allclose(quads.points[i, 1], 0.5) and quads.points[i, 0].max() < 1.0
+    assert grid_points(quads.points, np.array([1 / 3, 1 / 4])) < 1e-5

@@ -146,6 +146,8 @@ class Motorcycles:
         Pc = self.P[mesh.corners]
         self.pts = [tuple((int(a), int(b)) for a, b in tri) for tri in Pc.tolist()]
         self.cells = cells.tolist()
+        self.float_pts = [tuple((float(a), float(b)) for a, b in tri) for tri in self.pts]
+        self.float_x = [tuple(map(tuple, tri)) for tri in mesh.x[cells].tolist()]
         # neighbours across local edge i (opposite corner i), and the transition there
         ends = cells[:, [[1, 2], [2, 0], [0, 1]]]
         keys = mesh.edges[:, 0] * n + mesh.edges[:, 1]
@@ -775,43 +777,55 @@ def _arc_points(mc, arc, n):
     return out
 
 
-def _bary(T, a, X):
-    b = np.linalg.solve(T, X - a)
-    return np.array([1 - b.sum(), b[0], b[1]])
+def _bary(A, X):
+    """Barycentric coordinates of X in the triangle A (three float pairs)."""
+    (a0, a1), (b0, b1), (c0, c1) = A
+    det = (b0 - a0) * (c1 - a1) - (b1 - a1) * (c0 - a0)
+    x0, x1 = X
+    l0 = ((c0 - b0) * (x1 - b1) - (c1 - b1) * (x0 - b0)) / det
+    l1 = ((a0 - c0) * (x1 - c1) - (a1 - c1) * (x0 - c0)) / det
+    return (l0, l1, 1.0 - l0 - l1)
 
 
 def _walk(mc, state, q, max_steps=100000):
-    """Walk straight from the state's point to q (walking frame), across triangles (and
-    seams); returns the new state (triangle, quarter turns and shift to the walking frame,
-    point) and the plane point of q."""
+    """Walk straight from the state's point to q (walking frame, floats), across
+    triangles (and seams); returns the new state (triangle, quarter turns and shift from
+    its chart to the walking frame, point) and the plane point of q (pure Python floats:
+    this is the inner loop of the quads)."""
     f, k, t, p = state
     entry = -1
+    fpts, nb, xs = mc.float_pts, mc.nb, mc.float_x
     for _ in range(max_steps):
-        A = np.array([_rot(k, c) for c in mc.pts[f]], dtype=float) + t
-        T = np.array([A[1] - A[0], A[2] - A[0]]).T
-
-        lq, lp = _bary(T, A[0], q), _bary(T, A[0], p)
-        if lq.min() >= -1e-12:
-            return (f, k, t, q), lq @ mc.mesh.x[mc.cells[f]]
-        best, i_best = np.inf, -1
+        A = [_rot(k, c) for c in fpts[f]]
+        A = [(a[0] + t[0], a[1] + t[1]) for a in A]
+        lq = _bary(A, q)
+        if min(lq) >= -1e-12:
+            x = xs[f]
+            return (f, k, t, q), (lq[0] * x[0][0] + lq[1] * x[1][0] + lq[2] * x[2][0],
+                                  lq[0] * x[0][1] + lq[1] * x[1][1] + lq[2] * x[2][1])
+        lp = _bary(A, p)
+        best, i_best = math.inf, -1
         for i in range(3):
             if lq[i] < 0 and i != entry:
                 s = lp[i] / (lp[i] - lq[i])
                 if s < best:
                     best, i_best = s, i
         if i_best < 0:
-            i_best = int(np.argmin(lq))
-            best = 0.0
-        p = p + max(best, 0.0) * (q - p)
-        g = mc.nb[f][i_best]
-        if g < 0:  # q is outside (round-off on the boundary): stop on it
-            lp = np.clip(_bary(T, A[0], p), 0, None)
-            lp /= lp.sum()
-            return (f, k, t, p), lp @ mc.mesh.x[mc.cells[f]]
+            i_best, best = min(range(3), key=lambda i: lq[i]), 0.0
+        best = max(best, 0.0)
+        p = (p[0] + best * (q[0] - p[0]), p[1] + best * (q[1] - p[1]))
+        g = nb[f][i_best]
+        if g < 0:  # q is outside (round-off on the boundary): stop where the walk left
+            lp = [max(v, 0.0) for v in _bary(A, p)]
+            total = sum(lp)
+            x = xs[f]
+            return (f, k, t, p), tuple(sum(lp[i] * x[i][c] for i in range(3)) / total
+                                       for c in range(2))
         j, e = mc.turn[f][i_best], mc.shift[f][i_best]
         k2 = (k - j) % 4
-        t = t - np.array(_rot(k2, e), dtype=float)
-        entry = mc.nb[g].index(f) if mc.nb[g].count(f) == 1 else -1
+        e = _rot(k2, e)
+        t = (t[0] - e[0], t[1] - e[1])
+        entry = nb[g].index(f) if nb[g].count(f) == 1 else -1
         f, k = g, k2
     raise LayoutError("a point of a patch could not be located in the map")
 
@@ -864,9 +878,8 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
         else:
             f, _, X0, d = arc.pieces[-1]
             d = (-d[0], -d[1])
-        origin = np.array([float(X0[0]), float(X0[1])])
-        du, dv = np.array(d, dtype=float), np.array([-d[1], d[0]], dtype=float)
-        state = (f, 0, np.zeros(2), origin)
+        origin = (float(X0[0]), float(X0[1]))
+        state = (f, 0, (0.0, 0.0), origin)
         for j in range(1, H):
             v = j / H
             order = range(1, W) if j % 2 else range(W - 1, 0, -1)
@@ -875,7 +888,8 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
                 x, y = ((1 - v) * bottom[i] + v * top[i] + (1 - u) * left[j] + u * right[j]
                         - ((1 - u) * (1 - v) * bottom[0] + u * (1 - v) * bottom[W]
                            + (1 - u) * v * top[0] + u * v * top[W]))
-                q = origin + UNIT * (x * du + y * dv)
+                q = (origin[0] + UNIT * (x * d[0] - y * d[1]),
+                     origin[1] + UNIT * (x * d[1] + y * d[0]))
                 state, point = _walk(mc, state, q)
                 grid[i, j] = len(points)
                 points.append(point)
