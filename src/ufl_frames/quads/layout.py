@@ -1,6 +1,7 @@
-r"""The T-mesh (motorcycle graph) of a seamless map, its patches and arcs, integer arc
-lengths, and the quads of every patch: a quantisation that cannot fold by construction
-(the idea of Quantized Global Parametrization, Campen–Bommes–Kobbelt 2015).
+r"""The T-mesh (motorcycle graph) of a seamless map, and its patches and arcs: the layout
+of a quantisation that cannot fold by construction (the idea of Quantized Global
+Parametrization, Campen–Bommes–Kobbelt 2015; :mod:`ufl_frames.quads.patches` gives the
+arcs integer lengths and fills the patches with quads).
 
 The seamless map (U, V) of :func:`~ufl_frames.param.seamless.integrate` is affine on every
 triangle, and across a cut edge the neighbour's chart is (U, V)_g = Rot^j (U, V)_f + t. Its
@@ -27,14 +28,7 @@ into rectangles of the parameter plane:
    quarter turns (unwrapped around a vertex's fan); the faces traced by turning left. A
    face whose corners are four of 90° and the rest 180° is a rectangle in the parameter
    plane: its four sides are runs of arcs;
-4. **integer arc lengths** (:func:`integer_lengths`): n_a ≥ 1 per arc with, per patch,
-   the arcs of opposite sides summing to the same integer, minimising Σ |n_a − L_a| (L_a
-   the arc's length in the map), a small integer program (SciPy's HiGHS ``milp``);
-5. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
-   integer positions along each arc (uniform in the map), the inside by transfinite
-   (Coons) blending in the patch's rectangle, and every point mapped back to the plane by
-   walking the triangles of the map from the patch's corner. Arc points are computed once,
-   so neighbouring patches share them: the quads are conforming.
+4. integer arc lengths and the quads of every patch: :mod:`ufl_frames.quads.patches`.
 
 Pure NumPy/SciPy (Python integers and fractions in the tracing).
 """
@@ -46,13 +40,10 @@ from fractions import Fraction
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import Bounds, LinearConstraint, milp
 
 from ufl_frames.param.seamless import Parametrisation, least_squares_system
-from ufl_frames.quads.extract import QuadMesh
 
-__all__ = ["Layout", "LayoutError", "Motorcycles", "fixed_point", "integer_lengths",
-           "layout", "patch_quads", "quads_of_map"]
+__all__ = ["Arc", "Layout", "LayoutError", "Motorcycles", "Trace", "fixed_point", "layout"]
 
 #: Fixed-point units per unit of the map.
 UNIT = 2**20
@@ -715,200 +706,3 @@ def _faces(arcs, ends, total):
         raise LayoutError(f"{len(bad)} faces of the traces are not rectangles (corner "
                           f"quarter turns {bad[:3]})")
     return patches
-
-
-# ---- integer lengths ----------------------------------------------------------------------
-def integer_lengths(lay: Layout, weights=None) -> np.ndarray:
-    """Integer lengths n_a ≥ 1 of the arcs with, per patch, equal sums on opposite sides,
-    closest to the arcs' lengths L_a in the map: min Σ w_a |n_a − L_a| (an integer program,
-    SciPy's HiGHS ``milp``; weights 1 by default). Raises :class:`LayoutError` where there
-    are none."""
-    L = lay.lengths()
-    A = L.size
-    w = np.ones(A) if weights is None else np.asarray(weights, dtype=float)
-    rows, cols, vals, count = [], [], [], 0
-    for sides in lay.patches:
-        for s in (0, 1):
-            for side, sign in ((sides[s], 1.0), (sides[s + 2], -1.0)):
-                for h in side:
-                    rows.append(count)
-                    cols.append(h // 2)
-                    vals.append(sign)
-            count += 1
-    eye = sp.identity(A, format="csr")
-    blocks = [LinearConstraint(sp.hstack([eye, -eye]), -np.inf, L),
-              LinearConstraint(sp.hstack([-eye, -eye]), -np.inf, -L)]
-    if count:
-        E = sp.csr_matrix((vals, (rows, cols)), shape=(count, A))
-        E.sum_duplicates()
-        blocks.append(LinearConstraint(sp.hstack([E, sp.csr_matrix((count, A))]), 0, 0))
-    result = milp(np.concatenate([np.zeros(A), w]), constraints=blocks,
-                  integrality=np.concatenate([np.ones(A), np.zeros(A)]),
-                  bounds=Bounds(np.concatenate([np.ones(A), np.zeros(A)]), np.inf))
-    if result.status != 0 or result.x is None:
-        raise LayoutError("no integer arc lengths ≥ 1 with equal opposite sides "
-                          f"({result.message})")
-    return np.rint(result.x[:A]).astype(np.int64)
-
-
-# ---- quads ---------------------------------------------------------------------------------
-def _physical(mc, f, X):
-    """The plane point of chart point X (floats, fixed-point units) of triangle f."""
-    A = np.array(mc.pts[f], dtype=float)
-    T = np.array([A[1] - A[0], A[2] - A[0]]).T
-    b = np.linalg.solve(T, np.asarray(X, dtype=float) - A[0])
-    lam = np.array([1 - b.sum(), b[0], b[1]])
-    return lam @ mc.mesh.x[mc.cells[f]]
-
-
-def _arc_points(mc, arc, n):
-    """The n − 1 inner points of an arc at its lengths k/n (uniform in the map)."""
-    lengths = [float(_piece_length(p)) for p in arc.pieces]
-    total = sum(lengths)
-    out, j, at = [], 0, 0.0
-    for k in range(1, n):
-        s = total * k / n
-        while j < len(lengths) - 1 and at + lengths[j] < s:
-            at += lengths[j]
-            j += 1
-        f, p0, _, d = arc.pieces[j]
-        out.append(_physical(mc, f, (float(p0[0]) + (s - at) * d[0],
-                                     float(p0[1]) + (s - at) * d[1])))
-    return out
-
-
-def _bary(A, X):
-    """Barycentric coordinates of X in the triangle A (three float pairs)."""
-    (a0, a1), (b0, b1), (c0, c1) = A
-    det = (b0 - a0) * (c1 - a1) - (b1 - a1) * (c0 - a0)
-    x0, x1 = X
-    l0 = ((c0 - b0) * (x1 - b1) - (c1 - b1) * (x0 - b0)) / det
-    l1 = ((a0 - c0) * (x1 - c1) - (a1 - c1) * (x0 - c0)) / det
-    return (l0, l1, 1.0 - l0 - l1)
-
-
-def _walk(mc, state, q, max_steps=100000):
-    """Walk straight from the state's point to q (walking frame, floats), across
-    triangles (and seams); returns the new state (triangle, quarter turns and shift from
-    its chart to the walking frame, point) and the plane point of q (pure Python floats:
-    this is the inner loop of the quads)."""
-    f, k, t, p = state
-    entry = -1
-    fpts, nb, xs = mc.float_pts, mc.nb, mc.float_x
-    for _ in range(max_steps):
-        A = [_rot(k, c) for c in fpts[f]]
-        A = [(a[0] + t[0], a[1] + t[1]) for a in A]
-        lq = _bary(A, q)
-        if min(lq) >= -1e-12:
-            x = xs[f]
-            return (f, k, t, q), (lq[0] * x[0][0] + lq[1] * x[1][0] + lq[2] * x[2][0],
-                                  lq[0] * x[0][1] + lq[1] * x[1][1] + lq[2] * x[2][1])
-        lp = _bary(A, p)
-        best, i_best = math.inf, -1
-        for i in range(3):
-            if lq[i] < 0 and i != entry:
-                s = lp[i] / (lp[i] - lq[i])
-                if s < best:
-                    best, i_best = s, i
-        if i_best < 0:
-            i_best, best = min(range(3), key=lambda i: lq[i]), 0.0
-        best = max(best, 0.0)
-        p = (p[0] + best * (q[0] - p[0]), p[1] + best * (q[1] - p[1]))
-        g = nb[f][i_best]
-        if g < 0:  # q is outside (round-off on the boundary): stop where the walk left
-            lp = [max(v, 0.0) for v in _bary(A, p)]
-            total = sum(lp)
-            x = xs[f]
-            return (f, k, t, p), tuple(sum(lp[i] * x[i][c] for i in range(3)) / total
-                                       for c in range(2))
-        j, e = mc.turn[f][i_best], mc.shift[f][i_best]
-        k2 = (k - j) % 4
-        e = _rot(k2, e)
-        t = (t[0] - e[0], t[1] - e[1])
-        entry = nb[g].index(f) if nb[g].count(f) == 1 else -1
-        f, k = g, k2
-    raise LayoutError("a point of a patch could not be located in the map")
-
-
-def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
-    """The quads of every patch (see the module text, step 5) for the integer arc lengths
-    ``n`` (:func:`integer_lengths`)."""
-    mc = lay.motorcycles
-    points = [None] * len(lay.nodes)
-    for arc in lay.arcs:
-        for node, (f, X) in ((arc.start, arc.pieces[0][:2]), (arc.end, (arc.pieces[-1][0],
-                                                                         arc.pieces[-1][2]))):
-            if points[node] is None:
-                points[node] = _physical(mc, f, (float(X[0]), float(X[1])))
-    arc_ids = []
-    for a, arc in enumerate(lay.arcs):
-        inner = _arc_points(mc, arc, int(n[a]))
-        arc_ids.append([arc.start] + list(range(len(points), len(points) + len(inner)))
-                       + [arc.end])
-        points += inner
-    quads = []
-    for sides in lay.patches:
-        runs, lengths = [], []
-        for side in sides:
-            ids, pos = [], [0.0]
-            for h in side:
-                a = h // 2
-                seq = arc_ids[a] if h % 2 == 0 else arc_ids[a][::-1]
-                ids += seq if not ids else seq[1:]
-                step = lay.arcs[a].length / int(n[a])
-                pos += [pos[-1] + step * (k + 1) for k in range(int(n[a]))]
-            runs.append(ids)
-            lengths.append(np.array(pos))
-        W, H = len(runs[0]) - 1, len(runs[1]) - 1
-        if len(runs[2]) - 1 != W or len(runs[3]) - 1 != H:
-            raise LayoutError("a patch's opposite sides have different integer lengths")
-        Lw, Lh = lengths[0][-1], lengths[1][-1]
-        bottom = np.stack([lengths[0], np.zeros(W + 1)], axis=1)
-        right = np.stack([np.full(H + 1, Lw), lengths[1]], axis=1)
-        top = np.stack([Lw - lengths[2], np.full(W + 1, Lh)], axis=1)[::-1]
-        left = np.stack([np.zeros(H + 1), Lh - lengths[3]], axis=1)[::-1]
-        grid = np.full((W + 1, H + 1), -1, dtype=np.int64)
-        grid[:, 0], grid[W, :] = runs[0], runs[1]
-        grid[:, H], grid[0, :] = runs[2][::-1], runs[3][::-1]
-        # the walking frame: the chart of the first piece at corner (0, 0), scaled to units
-        h = sides[0][0]
-        arc = lay.arcs[h // 2]
-        if h % 2 == 0:
-            f, X0, _, d = arc.pieces[0]
-        else:
-            f, _, X0, d = arc.pieces[-1]
-            d = (-d[0], -d[1])
-        origin = (float(X0[0]), float(X0[1]))
-        state = (f, 0, (0.0, 0.0), origin)
-        for j in range(1, H):
-            v = j / H
-            order = range(1, W) if j % 2 else range(W - 1, 0, -1)
-            for i in order:
-                u = i / W
-                x, y = ((1 - v) * bottom[i] + v * top[i] + (1 - u) * left[j] + u * right[j]
-                        - ((1 - u) * (1 - v) * bottom[0] + u * (1 - v) * bottom[W]
-                           + (1 - u) * v * top[0] + u * v * top[W]))
-                q = (origin[0] + UNIT * (x * d[0] - y * d[1]),
-                     origin[1] + UNIT * (x * d[1] + y * d[0]))
-                state, point = _walk(mc, state, q)
-                grid[i, j] = len(points)
-                points.append(point)
-        g = grid
-        quads.append(np.stack([g[:-1, :-1], g[1:, :-1], g[1:, 1:], g[:-1, 1:]],
-                              axis=-1).reshape(-1, 4))
-    quads = np.concatenate(quads) if quads else np.zeros((0, 4), dtype=np.int64)
-    a, b = quads.ravel(), np.roll(quads, -1, axis=1).ravel()
-    npts = len(points)
-    pairs, counts = np.unique(np.minimum(a, b) * npts + np.maximum(a, b), return_counts=True)
-    once = pairs[counts == 1]
-    return QuadMesh(points=np.array(points), quads=quads, chains={},
-                    boundary=np.stack([once // npts, once % npts], axis=1))
-
-
-def quads_of_map(param: Parametrisation) -> tuple[QuadMesh, Layout, np.ndarray]:
-    """The quad mesh of the seamless map ``param`` by its T-mesh: :func:`layout`,
-    :func:`integer_lengths`, :func:`patch_quads`. Returns the quads, the layout and the
-    integer arc lengths."""
-    lay = layout(param)
-    n = integer_lengths(lay)
-    return patch_quads(lay, n), lay, n
