@@ -300,3 +300,13 @@ def test_four_singularities_in_a_disk_line_up_by_collapsing_thin_patches():
     # the boundary polygon of some 38 chords (not uniform in length) loses 1.2 % of π
     assert check_quad_mesh(improved.points, quads.quads, area=np.pi, rtol=0.02) == []
     assert quad_quality(improved.points, quads.quads)["min_sj"] > 0.5
+
+
+def test_a_strip_thinner_than_half_a_quad_keeps_one_layer():
+    """A 2 × 0.1 strip at 3.3 quads per unit is 0.33 quads high: collapsing it would
+    glue its two boundary sides (the domain lost), so it keeps one layer of 7 quads."""
+    x, cells = grid(20, 2, 0, 2, 0, 0.1)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    quads, lay, n = patches.quads_of_map(seamless.integrate(mesh, 3.3))
+    assert sorted(n.tolist()) == [1, 1, 7, 7]
+    assert check_quad_mesh(quads.points, quads.quads, area=0.2, rtol=1e-9) == []

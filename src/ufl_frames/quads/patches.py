@@ -110,9 +110,10 @@ class _Points:
             self.arc_ids.append([arc.start] + inner + ([arc.end] if k > 0 else []))
         self.count = count
         self.parent = list(range(count))
-        for arc, k in zip(lay.arcs, n.tolist(), strict=True):
+        self.events = []  # (zero arcs, point pairs they glue)
+        for a, (arc, k) in enumerate(zip(lay.arcs, n.tolist(), strict=True)):
             if k == 0:
-                self.union(arc.start, arc.end)
+                self.events.append(([a], [(arc.start, arc.end)]))
         self.runs = []
         for sides in lay.patches:
             runs = []
@@ -127,12 +128,15 @@ class _Points:
             if len(runs[2]) - 1 != W or len(runs[3]) - 1 != H:
                 raise LayoutError("a patch's opposite sides have different integer lengths")
             if W == 0:  # collapsed across: its right side is its left side
-                for a, b in zip(runs[1], runs[3][::-1], strict=True):
-                    self.union(a, b)
+                self.events.append(([h // 2 for h in sides[0] + sides[2]],
+                                    list(zip(runs[1], runs[3][::-1], strict=True))))
             if H == 0:
-                for a, b in zip(runs[0], runs[2][::-1], strict=True):
-                    self.union(a, b)
+                self.events.append(([h // 2 for h in sides[1] + sides[3]],
+                                    list(zip(runs[0], runs[2][::-1], strict=True))))
             self.runs.append(runs)
+        for _, pairs in self.events:
+            for a, b in pairs:
+                self.union(a, b)
 
     def find(self, a):
         root = a
@@ -155,20 +159,35 @@ class _Points:
         return out
 
     def bad_merges(self) -> list:
-        """Zero arcs in a glued class that holds two singular vertices, or a singular
-        vertex and a boundary point."""
+        """The zero arcs of the glues that put on one point two singular vertices, a
+        singular vertex and the boundary, or two boundary points not joined along the
+        boundary by zero arcs (a part of the domain collapsed)."""
         mc = self.lay.motorcycles
-        singular = [i for i, key in enumerate(self.lay.nodes)
-                    if key[0] == "v" and key[1] in mc.singular]
-        boundary = {self.find(i) for i in self.boundary_ids()}
-        seen, bad_roots = set(), set()
-        for i in singular:
-            root = self.find(i)
-            if root in seen or root in boundary:
-                bad_roots.add(root)
-            seen.add(root)
-        return [a for a, arc in enumerate(self.lay.arcs)
-                if self.n[a] == 0 and self.find(arc.start) in bad_roots]
+        along = list(range(self.count))  # union–find of the zero boundary arcs alone
+
+        def find(a):
+            while along[a] != a:
+                along[a] = along[along[a]]
+                a = along[a]
+            return a
+
+        for arc, k in zip(self.lay.arcs, self.n.tolist(), strict=True):
+            if k == 0 and arc.boundary:
+                along[max(find(arc.start), find(arc.end))] = min(find(arc.start),
+                                                                 find(arc.end))
+        pieces: dict = {}
+        for i in self.boundary_ids():
+            pieces.setdefault(self.find(i), set()).add(find(i))
+        bad = {root for root, parts in pieces.items() if len(parts) > 1}
+        seen = set()
+        for i, key in enumerate(self.lay.nodes):
+            if key[0] == "v" and key[1] in mc.singular:
+                root = self.find(i)
+                if root in seen or root in pieces:
+                    bad.add(root)
+                seen.add(root)
+        return sorted({a for arcs, pairs in self.events
+                       if any(self.find(p) in bad for p, _ in pairs) for a in arcs})
 
 
 def _physical(mc, f, X):
