@@ -105,6 +105,18 @@ def fixed_point(param: Parametrisation, T=None, unit: int = UNIT) -> np.ndarray:
     return P
 
 
+class _Incidence:
+    """The triangles of every vertex (``incidence[v]``, a list), from one sort."""
+
+    def __init__(self, cells, n):
+        order = np.argsort(cells.ravel(), kind="stable")
+        self.faces = order // 3
+        self.start = np.searchsorted(cells.ravel()[order], np.arange(n + 1))
+
+    def __getitem__(self, v):
+        return self.faces[self.start[v]:self.start[v + 1]].tolist()
+
+
 @dataclass
 class Trace:
     """One traced iso-line: ``pieces`` (triangle, start, end, direction) in the triangle's
@@ -135,10 +147,12 @@ class Motorcycles:
         m, n = cells.shape[0], mesh.x.shape[0]
         self.max_steps = max_steps or 20 * m + 100
         Pc = self.P[mesh.corners]
-        self.pts = [tuple((int(a), int(b)) for a, b in tri) for tri in Pc.tolist()]
+        self.pts = [((a, b), (c, d), (e, f)) for a, b, c, d, e, f in Pc.reshape(m, 6).tolist()]
         self.cells = cells.tolist()
-        self.float_pts = [tuple((float(a), float(b)) for a, b in tri) for tri in self.pts]
-        self.float_x = [tuple(map(tuple, tri)) for tri in mesh.x[cells].tolist()]
+        self.float_pts = [((a, b), (c, d), (e, f)) for a, b, c, d, e, f
+                          in Pc.reshape(m, 6).astype(float).tolist()]
+        self.float_x = [((a, b), (c, d), (e, f)) for a, b, c, d, e, f
+                        in mesh.x[cells].reshape(m, 6).tolist()]
         # neighbours across local edge i (opposite corner i), and the transition there
         ends = cells[:, [[1, 2], [2, 0], [0, 1]]]
         keys = mesh.edges[:, 0] * n + mesh.edges[:, 1]
@@ -165,10 +179,7 @@ class Motorcycles:
         self.on_boundary = np.zeros(n, dtype=bool)
         self.on_boundary[mesh.edges[boundary].ravel()] = True
         self.singular = {int(v): int(t) for v, t in zip(mesh.singular, mesh.turns, strict=True)}
-        self.vertex_faces = defaultdict(list)
-        for f, tri in enumerate(self.cells):
-            for v in tri:
-                self.vertex_faces[v].append(f)
+        self.vertex_faces = _Incidence(cells, n)
         det = ((Pc[:, 1, 0] - Pc[:, 0, 0]) * (Pc[:, 2, 1] - Pc[:, 0, 1])
                - (Pc[:, 1, 1] - Pc[:, 0, 1]) * (Pc[:, 2, 0] - Pc[:, 0, 0]))
         self.folded = det <= 0
