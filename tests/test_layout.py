@@ -310,3 +310,28 @@ def test_a_strip_thinner_than_half_a_quad_keeps_one_layer():
     quads, lay, n = patches.quads_of_map(seamless.integrate(mesh, 3.3))
     assert sorted(n.tolist()) == [1, 1, 7, 7]
     assert check_quad_mesh(quads.points, quads.quads, area=0.2, rtol=1e-9) == []
+
+
+@pytest.mark.parametrize("amount", [0.0, 0.05], ids=["along-edges", "generic"])
+def test_a_square_hole_gives_eight_patches(amount):
+    """[0, 3]² without [1, 2]²: each corner of the hole is concave (270° in the domain)
+    and continues both its sides to the outer boundary: 8 traces, 8 patches (Euler's
+    formula on an annulus: nodes − arcs + patches = 0), the exact grid across the cut."""
+    x, cells = grid(12, 12, 0, 3, 0, 3)
+    middle = x[cells].mean(axis=1)
+    cells = cells[~((middle > 1) & (middle < 2)).all(axis=1)]
+    used = np.unique(cells)
+    remap = np.full(x.shape[0], -1)
+    remap[used] = np.arange(used.size)
+    x, cells = x[used], remap[cells]
+    on_hole = np.isclose(np.abs(x - 1.5).max(axis=1), 0.5)
+    x = x + amount * (~on_hole)[:, None] * np.sin(5 * x[:, ::-1] + 1) * \
+        (x * (3 - x)).prod(axis=1, keepdims=True) / 4
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    assert mesh.paths == 1
+    quads, lay, n = patches.quads_of_map(seamless.integrate(mesh, 2.2))
+    assert len(lay.traces) == 8 and all(t.stop == "boundary" for t in lay.traces)
+    assert len(lay.patches) == 8 and len(lay.nodes) - len(lay.arcs) + len(lay.patches) == 0
+    assert n.tolist() == [2] * 24 and quads.num_quads == 32
+    assert check_quad_mesh(quads.points, quads.quads, area=8.0, rtol=1e-9) == []
+    assert grid_points(quads.points, 0.5) < 1e-5
