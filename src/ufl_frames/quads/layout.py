@@ -548,9 +548,15 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
     traces = mc.traces if mc.traces else mc.run()
     failed = [t for t in traces if t.stop in ("fold", "limit")]
     if failed:
-        raise LayoutError(f"{len(failed)} of {len(traces)} traces failed "
-                          f"({', '.join(sorted({t.stop for t in failed}))}: the map folds "
-                          "there or a trace does not end)")
+        x = mc.mesh.x
+        where = [x[t.end[1]] if t.end[0] == "v" else x[mc.cells[t.end[1]]].mean(axis=0)
+                 for t in failed]
+        what = "; ".join(
+            ("one enters a folded triangle" if t.stop == "fold" else
+             f"one does not end within {mc.max_steps} triangles")
+            + f" near ({p[0]:.4g}, {p[1]:.4g})" for t, p in zip(failed[:3], where, strict=False))
+        raise LayoutError(f"{len(failed)} of {len(traces)} traces failed ({what}); the "
+                          f"seamless map folds on {int(mc.folded.sum())} triangles")
     node_id: dict = {}
 
     def node(key):
