@@ -147,12 +147,11 @@ class Motorcycles:
         m, n = cells.shape[0], mesh.x.shape[0]
         self.max_steps = max_steps or 20 * m + 100
         Pc = self.P[mesh.corners]
-        self.pts = [((a, b), (c, d), (e, f)) for a, b, c, d, e, f in Pc.reshape(m, 6).tolist()]
+        # nested lists (tolist is fast); points taken from them become tuples
+        self.pts = Pc.tolist()
         self.cells = cells.tolist()
-        self.float_pts = [((a, b), (c, d), (e, f)) for a, b, c, d, e, f
-                          in Pc.reshape(m, 6).astype(float).tolist()]
-        self.float_x = [((a, b), (c, d), (e, f)) for a, b, c, d, e, f
-                        in mesh.x[cells].reshape(m, 6).tolist()]
+        self.float_pts = Pc.astype(float).tolist()
+        self.float_x = mesh.x[cells].tolist()
         # neighbours across local edge i (opposite corner i), and the transition there
         ends = cells[:, [[1, 2], [2, 0], [0, 1]]]
         keys = mesh.edges[:, 0] * n + mesh.edges[:, 1]
@@ -160,8 +159,8 @@ class Motorcycles:
         faces = mesh.faces[self.edge_id]  # (m, 3, 2)
         nb = np.where(faces[..., 0] == np.arange(m)[:, None], faces[..., 1], faces[..., 0])
         self.nb = nb.tolist()
-        self.turn = [[0, 0, 0] for _ in range(m)]
-        self.shift = [[(0, 0)] * 3 for _ in range(m)]
+        self.turn = np.zeros((m, 3), dtype=np.int64).tolist()
+        self.shift = np.zeros((m, 3, 2), dtype=np.int64).tolist()
         in_cut = np.zeros(mesh.edges.shape[0], dtype=bool)
         in_cut[mesh.cut] = True
         for f, i in zip(*np.nonzero(in_cut[self.edge_id]), strict=True):
@@ -337,6 +336,7 @@ class Motorcycles:
     def trace(self, f, p, d, start_key):
         """Trace from point p of triangle f in direction d (see the class text)."""
         tid = len(self.traces)
+        p = tuple(p)
         tr = Trace(start=start_key)
         self.traces.append(tr)
         origin = True
@@ -364,7 +364,7 @@ class Motorcycles:
                     tr.stop, tr.end = "fold", ("f", f, p)
                     return tr
                 vertex = max(ahead)[1]
-                q = A[vertex]
+                q = tuple(A[vertex])
             hit = self.hits(tid, f, p, q, d, origin)
             if hit is not None:
                 _, tid2, index, own, X = hit
@@ -407,7 +407,7 @@ class Motorcycles:
             else:
                 tr.stop, tr.end = "fold", ("v", w)
                 return tr
-            f, p, d = g, self.pts[g][loc], dd
+            f, p, d = g, tuple(self.pts[g][loc]), dd
         tr.stop, tr.end = "limit", ("f", f, p)
         return tr
 
