@@ -196,8 +196,10 @@ def test_a_folded_map_is_reported():
     v = int(np.flatnonzero(np.all(np.isclose(x, [0.5, 1.0 + 1 / 6]), axis=1))[0])
     uv[mesh.corners[mesh.cells == v]] += [0.0, -1.2]
     folded = seamless.parametrisation(mesh, uv, 3.3)
-    lay = layout.layout(folded)
+    quads, lay, _ = patches.quads_of_map(folded)
     assert np.array_equal(lay.folded, np.flatnonzero(seamless.folded(folded)))
+    assert lay.unlocated == 0  # the patch's points walked around the fold
+    assert check_quad_mesh(quads.points, quads.quads, area=3.0, rtol=1e-3) == []
 
 
 def test_a_trace_that_does_not_end_is_reported():

@@ -501,7 +501,9 @@ class Layout:
     counter-clockwise, a side a list of half-arcs (2 a: arc a forwards, 2 a + 1
     backwards); the ``traces``; ``motorcycles`` the tracer (charts and topology);
     ``folded`` the triangles where the map folds (no trace crosses them, but the quads
-    of their patch may be poor there)."""
+    of their patch may be poor there); ``unlocated`` how many quad points
+    :func:`~ufl_frames.quads.patches.patch_quads` could not find in the map (lost in a
+    fold: placed approximately)."""
 
     arcs: list
     nodes: list
@@ -509,6 +511,7 @@ class Layout:
     traces: list
     motorcycles: Motorcycles
     folded: np.ndarray
+    unlocated: int = 0
 
     def lengths(self) -> np.ndarray:
         return np.array([a.length for a in self.arcs])

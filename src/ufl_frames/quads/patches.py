@@ -223,7 +223,7 @@ def _bary(A, X):
     return (l0, l1, 1.0 - l0 - l1)
 
 
-def _walk(mc, state, q, max_steps=100000):
+def _walk(mc, state, q, max_steps):
     """Walk straight from the state's point to q (walking frame, floats), across
     triangles (and seams); returns the new state (triangle, quarter turns and shift from
     its chart to the walking frame, point) and the plane point of q (pure Python floats:
@@ -263,12 +263,23 @@ def _walk(mc, state, q, max_steps=100000):
         t = (t[0] - e[0], t[1] - e[1])
         entry = nb[g].index(f) if nb[g].count(f) == 1 else -1
         f, k = g, k2
-    raise LayoutError("a point of a patch could not be located in the map")
+    return None, None  # lost (in a fold): the caller tries another way
+
+
+def _walk_point(mc, state):
+    """The plane point of a walk's state (its point clamped into its triangle)."""
+    f, k, t, p = state
+    A = [_rot(k, c) for c in mc.float_pts[f]]
+    lam = [max(v, 0.0) for v in _bary([(a[0] + t[0], a[1] + t[1]) for a in A], p)]
+    x = mc.float_x[f]
+    return tuple(sum(lam[i] * x[i][c] for i in range(3)) / sum(lam) for c in range(2))
 
 
 def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
     """The quads of every patch of ``lay`` for the integer arc lengths ``n``
-    (:func:`integer_lengths`; see the module text, step 2)."""
+    (:func:`integer_lengths`; see the module text, step 2). A point whose walk gets lost
+    in a fold of the map (one that no trace crosses) is walked to again from the patch's
+    corner, else placed where the walk was; ``lay.unlocated`` counts those."""
     mc = lay.motorcycles
     pts = _Points(lay, n)
     position = [None] * pts.count
@@ -280,7 +291,8 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
     for a, arc in enumerate(lay.arcs):
         for i, p in zip(pts.arc_ids[a][1:-1], _arc_points(mc, arc, int(n[a])), strict=True):
             position[i] = p
-    quads = []
+    quads, lost = [], 0
+    steps = 50 * int(math.sqrt(len(mc.cells))) + 1000  # a walk longer than this is lost
     for sides, runs in zip(lay.patches, pts.runs, strict=True):
         W, H = len(runs[0]) - 1, len(runs[1]) - 1
         if W == 0 or H == 0:
@@ -310,7 +322,7 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
             f, _, X0, d = arc.pieces[-1]
             d = (-d[0], -d[1])
         origin = (float(X0[0]), float(X0[1]))
-        state = (f, 0, (0.0, 0.0), origin)
+        state = start = (f, 0, (0.0, 0.0), origin)
         for j in range(1, H):
             v = j / H
             for i in (range(1, W) if j % 2 else range(W - 1, 0, -1)):
@@ -320,12 +332,19 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
                            + (1 - u) * v * top[0] + u * v * top[W]))
                 q = (origin[0] + UNIT * (x * d[0] - y * d[1]),
                      origin[1] + UNIT * (x * d[1] + y * d[0]))
-                state, point = _walk(mc, state, q)
+                moved, point = _walk(mc, state, q, steps)
+                if moved is None:  # lost in a fold: from the corner instead, else approximate
+                    moved, point = _walk(mc, start, q, steps)
+                if moved is None:
+                    lost += 1
+                    moved, point = state, _walk_point(mc, state)
+                state = moved
                 grid[i, j] = len(position)
                 position.append(point)
         g = grid
         quads.append(np.stack([g[:-1, :-1], g[1:, :-1], g[1:, 1:], g[:-1, 1:]],
                               axis=-1).reshape(-1, 4))
+    lay.unlocated = lost
     quads = np.concatenate(quads) if quads else np.zeros((0, 4), dtype=np.int64)
     # glued points: one point each, the singular vertex's, else the boundary's, else the mean
     total = len(position)
