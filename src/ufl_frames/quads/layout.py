@@ -74,11 +74,19 @@ def _sub(a, b):
 
 
 def fixed_point(param: Parametrisation, T=None, unit: int = UNIT) -> np.ndarray:
-    """The wedge values (W, 2) as exact integers, ``unit`` per unit of the map: x = T y
-    with T the seamless constraints' elimination (``least_squares_system``; its entries
-    are halves where a singular vertex is in them) and y the free values rounded to a
-    multiple of T's denominator, so that every seam's transition and every boundary
-    curve hold exactly."""
+    """The wedge values as exact integers: x = T y with T the seamless constraints'
+    elimination (``least_squares_system``; its entries are halves where a singular vertex
+    is in them) and y the free values rounded to a multiple of T's denominator, so that
+    every seam's transition and every boundary curve hold exactly.
+
+    Args:
+        param: the seamless map (its values less those of wedge 0).
+        T: the elimination, if the caller has it (else built again).
+        unit: fixed-point units per unit of the map.
+
+    Returns:
+        (W, 2) int64. Raises :class:`LayoutError` if the map is not seamless.
+    """
     mesh = param.mesh
     if T is None:
         _, _, T = least_squares_system(mesh, param.scale, 0)
@@ -190,7 +198,16 @@ class Motorcycles:
 
     # ---- fans -------------------------------------------------------------------------
     def cross_edge(self, f, i, p, d):
-        """Triangle across local edge i of f, with point p and direction d in its chart."""
+        """Across local edge i of triangle f.
+
+        Args:
+            f, i: the triangle and its local edge (opposite corner i).
+            p, d: a point and a direction in f's chart.
+
+        Returns:
+            (g, p, d, j): the neighbour (−1: boundary), p and d in its chart, and the
+            quarter turns j of the transition from f's chart to g's.
+        """
         g, j, t = self.nb[f][i], self.turn[f][i], self.shift[f][i]
         q = _rot(j, p)
         return g, (q[0] + t[0], q[1] + t[1]), _rot(j, d), j
@@ -227,6 +244,18 @@ class Motorcycles:
         return _sub(A[(loc + 1) % 3], w), _sub(A[(loc + 2) % 3], w)
 
     def in_sector(self, f, loc, d, strict_first=False):
+        """Whether direction d leaves triangle f's corner ``loc`` into the triangle: the
+        half-open sector from its first edge (included, unless ``strict_first``; the
+        trace then runs along that edge with the triangle on its left) to its second.
+
+        Args:
+            f, loc: the triangle and its corner.
+            d: an axis direction in f's chart.
+            strict_first: exclude the first edge (a boundary edge).
+
+        Returns:
+            bool.
+        """
         va, vb = self.sector(f, loc)
         c = _cross(va, d)
         return (c > 0 or (c == 0 and not strict_first and va[0] * d[0] + va[1] * d[1] > 0)) \
@@ -280,6 +309,14 @@ class Motorcycles:
         return ("f", f, (Fraction(X[0]), Fraction(X[1])))
 
     def register(self, tid, index, f, p0, p1, d):
+        """Record piece ``index`` of trace ``tid`` (p0 → p1 along d in triangle f's chart)
+        for the later traces' meeting tests; a piece along an edge in the neighbour too.
+
+        Args:
+            tid, index: the trace and the piece.
+            f: the triangle.
+            p0, p1, d: the piece's ends and direction in f's chart.
+        """
         c = 0 if d[0] == 0 else 1  # the constant coordinate
         o = 1 - c
         lo, hi = min(p0[o], p1[o]), max(p0[o], p1[o])
@@ -301,9 +338,20 @@ class Motorcycles:
                                              max(q0[og], q1[og])) + back)
 
     def hits(self, tid, f, p0, p1, d, origin):
-        """The nearest point of (p0, p1] where an earlier piece meets this one: (distance,
-        trace, piece, point in the piece's chart) or None; at the trace's origin a
-        collinear overlap counts (the trace repeats an earlier one: it is empty)."""
+        """The nearest point of (p0, p1] where a recorded piece meets this one; at the
+        trace's origin a collinear overlap counts (the trace repeats an earlier one: it
+        is empty).
+
+        Args:
+            tid: this trace.
+            f: the triangle.
+            p0, p1, d: this piece's ends and direction in f's chart.
+            origin: whether p0 is the trace's origin.
+
+        Returns:
+            None, or (distance, trace met, its piece, the point in that piece's chart, the
+            point in f's chart).
+        """
         c = 0 if d[0] == 0 else 1
         o = 1 - c
         sigma, level = d[o], p0[c]
@@ -334,7 +382,16 @@ class Motorcycles:
         return best
 
     def trace(self, f, p, d, start_key):
-        """Trace from point p of triangle f in direction d (see the class text)."""
+        """Trace one iso-line (see the class text) and record it.
+
+        Args:
+            f: the triangle it starts into.
+            p, d: its origin and axis direction in f's chart.
+            start_key: the origin's node key.
+
+        Returns:
+            The :class:`Trace` (``stop`` says how it ended).
+        """
         tid = len(self.traces)
         p = tuple(p)
         tr = Trace(start=start_key)
@@ -635,8 +692,18 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
 
 
 def _node_ends(mc, arcs, nodes):
-    """Per node its ends: (quarter turns, half-arc leaving it), and its cyclic total in
-    quarter turns (None on the boundary: no turning past the outside)."""
+    """The ends of the arcs at every node, ordered counter-clockwise.
+
+    Args:
+        mc: the tracer.
+        arcs: the arcs.
+        nodes: the node keys.
+
+    Returns:
+        (ends, total): per node its [(quarter turns, half-arc leaving it)] sorted (turns
+        unwrapped around a vertex's fan), and its cyclic total in quarter turns (None on
+        the boundary: no turning past the outside).
+    """
     leaving = defaultdict(list)  # node -> (triangle, direction, half-arc)
     for a, arc in enumerate(arcs):
         f0, _, _, d0 = arc.pieces[0]
@@ -684,7 +751,16 @@ def _node_ends(mc, arcs, nodes):
 
 def _faces(arcs, ends, total):
     """The faces, traced by turning left at every node; each must be a rectangle: four
-    corners of a quarter turn, the others straight. Returns the patches' four sides."""
+    corners of a quarter turn, the others straight.
+
+    Args:
+        arcs: the arcs (boundary arcs are walked forwards only).
+        ends, total: of :func:`_node_ends`.
+
+    Returns:
+        Per patch its four sides (lists of half-arcs), counter-clockwise. Raises
+        :class:`LayoutError` where a face is not a rectangle.
+    """
     where = {}
     for n, items in ends.items():
         for rank, (_, h) in enumerate(items):

@@ -39,7 +39,16 @@ COLLAPSE_BELOW = 0.5
 
 
 def _solve(lay: Layout, lower: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """min Σ w |n − L| over integers n ≥ ``lower`` with equal opposite sides per patch."""
+    """min Σ w |n − L| over integers n ≥ ``lower`` with equal opposite sides per patch.
+
+    Args:
+        lay: the layout (L its arc lengths).
+        lower: per arc its lower bound (0 or 1).
+        weights: per arc w.
+
+    Returns:
+        n (A,) int64; raises :class:`LayoutError` where there is none.
+    """
     L = lay.lengths()
     A = L.size
     rows, cols, vals, count = [], [], [], 0
@@ -160,8 +169,9 @@ class _Points:
 
     def bad_merges(self) -> list:
         """The zero arcs of the glues that put on one point two singular vertices, a
-        singular vertex and the boundary, or two boundary points not joined along the
-        boundary by zero arcs (a part of the domain collapsed)."""
+        singular vertex and the boundary, two boundary points not joined along the
+        boundary by zero arcs (a part of the domain collapsed), or two neighbouring points
+        of a patch that keeps its quads."""
         mc = self.lay.motorcycles
         along = list(range(self.count))  # union–find of the zero boundary arcs alone
 
@@ -179,6 +189,11 @@ class _Points:
         for i in self.boundary_ids():
             pieces.setdefault(self.find(i), set()).add(find(i))
         bad = {root for root, parts in pieces.items() if len(parts) > 1}
+        for runs in self.runs:  # a patch left with quads whose two corners are one point
+            if len(runs[0]) > 1 and len(runs[1]) > 1:
+                for ids in runs:
+                    bad.update(self.find(u) for u, v in zip(ids, ids[1:], strict=False)
+                               if self.find(u) == self.find(v))
         seen = set()
         for i, key in enumerate(self.lay.nodes):
             if key[0] == "v" and key[1] in mc.singular:
@@ -191,14 +206,32 @@ class _Points:
 
 
 def _physical(mc, f, X):
-    """The plane point of chart point X (floats, fixed-point units) of triangle f."""
+    """The plane point of a chart point.
+
+    Args:
+        mc: the tracer (charts).
+        f: the triangle.
+        X: the point in f's chart (floats, fixed-point units).
+
+    Returns:
+        (2,) array.
+    """
     A = np.array(mc.pts[f], dtype=float)
     T = np.array([A[1] - A[0], A[2] - A[0]]).T
     b = np.linalg.solve(T, np.asarray(X, dtype=float) - A[0])
     lam = np.array([1 - b.sum(), b[0], b[1]])
     return lam @ mc.mesh.x[mc.cells[f]]
 def _arc_points(mc, arc, n):
-    """The n − 1 inner points of an arc at its lengths k/n (uniform in the map)."""
+    """The inner points of an arc at its lengths k/n, k = 1 … n − 1 (uniform in the map).
+
+    Args:
+        mc: the tracer (charts).
+        arc: the arc.
+        n: its integer length.
+
+    Returns:
+        A list of n − 1 plane points.
+    """
     lengths = [float(_piece_length(p)) for p in arc.pieces]
     total = sum(lengths)
     out, j, at = [], 0, 0.0
@@ -224,10 +257,19 @@ def _bary(A, X):
 
 
 def _walk(mc, state, q, max_steps):
-    """Walk straight from the state's point to q (walking frame, floats), across
-    triangles (and seams); returns the new state (triangle, quarter turns and shift from
-    its chart to the walking frame, point) and the plane point of q (pure Python floats:
-    this is the inner loop of the quads)."""
+    """Walk straight from the state's point to q across triangles (and seams), in pure
+    Python floats (the inner loop of the quads).
+
+    Args:
+        mc: the tracer (charts, neighbours, transitions).
+        state: (triangle, quarter turns and shift from its chart to the walking frame,
+            point in the walking frame).
+        q: the target in the walking frame.
+        max_steps: the most triangles to cross.
+
+    Returns:
+        (state at q, plane point of q), or (None, None) if the walk got lost (in a fold).
+    """
     f, k, t, p = state
     entry = -1
     fpts, nb, xs = mc.float_pts, mc.nb, mc.float_x
