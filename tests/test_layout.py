@@ -337,3 +337,31 @@ def test_a_square_hole_gives_eight_patches(amount):
     assert n.tolist() == [2] * 24 and quads.num_quads == 32
     assert check_quad_mesh(quads.points, quads.quads, area=8.0, rtol=1e-9) == []
     assert grid_points(quads.points, 0.5) < 1e-5
+
+
+@pytest.mark.parametrize("seed", [101, 110, 128])
+def test_random_pairs_of_singularities_give_valid_quads(seed):
+    """1 to 3 ± pairs at random on a wobbled square mesh, a random scale: the seamless
+    map is fold-free, so the layout exists, every singular vertex is a quad vertex of
+    valence 4 − turn, and with the worst quads improved (quads.improve) the mesh is
+    valid."""
+    from ufl_frames.quads.improve import improve_worst_quads
+
+    rng = np.random.default_rng(seed)
+    k = rng.integers(1, 4)
+    centres, signs = rng.uniform(-0.8, 0.8, (2 * k, 2)), np.array([1, -1] * k)
+    x, cells = grid(40, 40, -1, 1, -1, 1)
+    x = wobble(x + 1, 0.05, 2, 2) - 1
+    theta = sum(s * np.arctan2(x[:, 1] - c[1], x[:, 0] - c[0])
+                for s, c in zip(signs, centres, strict=True)) / 4
+    mesh = cut.cut_mesh(x, cells, odeco.frames_to_q(np.ones((x.shape[0], 2)), theta))
+    param = seamless.integrate(mesh, rng.uniform(2, 10))
+    assert not seamless.folded(param).any()
+    quads, lay, n = patches.quads_of_map(param)
+    assert len(lay.nodes) - len(lay.arcs) + len(lay.patches) == 1
+    for v, turn in zip(mesh.singular, mesh.turns, strict=True):
+        at = np.flatnonzero(np.linalg.norm(quads.points - mesh.x[v], axis=1) < 1e-12)
+        assert at.size == 1
+        assert np.count_nonzero(quads.quads == at[0]) == 4 - turn
+    points = improve_worst_quads(quads.points, quads.quads)
+    assert check_quad_mesh(points, quads.quads, area=4.0, rtol=0.01) == []
