@@ -365,3 +365,40 @@ def test_random_pairs_of_singularities_give_valid_quads(seed):
         assert np.count_nonzero(quads.quads == at[0]) == 4 - turn
     points = improve_worst_quads(quads.points, quads.quads)
     assert check_quad_mesh(points, quads.quads, area=4.0, rtol=0.01) == []
+
+
+@pytest.mark.parametrize("case", ["pair-1", "pair-2", "quarter", "pair-wide", "annulus"])
+def test_an_integer_grid_map_gives_the_extracted_quads(case):
+    """On the integer-grid map of the greedy quantisation (param.quantise) every trace runs
+    on an integer line: into other singular vertices, along other traces, through mesh
+    vertices, the exact coincidences a seamless map avoids. Its layout's arcs have integer
+    lengths, and its quads are those that quads.extract traces out of the same map: the
+    same points (to fixed point) and the same quads."""
+    from ufl_frames.param import quantise
+    from ufl_frames.quads import extract
+
+    if case == "annulus":
+        x, cells = annulus(12, 72)
+        q, scale = annulus_field(x), 4.0
+    elif case == "quarter":
+        x, cells = grid(16, 16, -1, 1, -1, 1)
+        q, scale = quarter_field(x), 3.0
+    else:
+        wide = case == "pair-wide"
+        x, cells = grid(30 if wide else 20, 30 if wide else 20, -1, 1, -1, 1)
+        plus, minus = ((-0.31, 0.013), (0.32, 0.107)) if wide else ((-0.11, 0.013),
+                                                                     (0.12, 0.007))
+        q, scale = pair_field(x, plus, minus), {"pair-1": 1.0, "pair-2": 2.0}.get(case, 4.0)
+    grid_map = quantise.quantise(cut.cut_mesh(x, cells, q), scale)
+    expected = extract.extract_quads(grid_map)
+    quads, lay, n = patches.quads_of_map(grid_map.param)
+    assert np.allclose(lay.lengths(), n, atol=1e-5)
+    if case in ("pair-1", "pair-2"):  # the pair on one integer line: a trace between them
+        assert [t.stop for t in lay.traces].count("singular") == 1
+    assert quads.points.shape == expected.points.shape
+    distance = np.linalg.norm(quads.points[:, None] - expected.points[None], axis=2)
+    match = distance.argmin(axis=1)
+    assert distance.min(axis=1).max() < 1e-4 / scale
+    assert np.unique(match).size == match.size
+    ours = {tuple(sorted(quad)) for quad in match[quads.quads].tolist()}
+    assert ours == {tuple(sorted(quad)) for quad in expected.quads.tolist()}
