@@ -402,3 +402,21 @@ def test_an_integer_grid_map_gives_the_extracted_quads(case):
     assert np.unique(match).size == match.size
     ours = {tuple(sorted(quad)) for quad in match[quads.quads].tolist()}
     assert ours == {tuple(sorted(quad)) for quad in expected.quads.tolist()}
+
+
+def test_two_components_each_get_their_grid():
+    """Two rectangles apart, [0, 2] × [0, 1] and [3, 4] × [0, 1], in one mesh: each is cut
+    and integrated on its own (one mesh would not cut), 7 × 3 and 3 × 3 quads."""
+    a, cells_a = grid(8, 4, 0, 2, 0, 1)
+    b, cells_b = grid(4, 4, 3, 4, 0, 1)
+    x, cells = np.concatenate([a, b]), np.concatenate([cells_a, cells_b + a.shape[0]])
+    assert [g.size for g in patches.components(cells)] == [64, 32]
+    with pytest.raises(ValueError, match="not connected"):
+        cut.cut_mesh(x, cells, constant_field(x))
+    quads, layouts = patches.quads_of_field(x, cells, constant_field(x), 3.3)
+    assert [len(lay.patches) for lay in layouts] == [1, 1]
+    assert quads.num_quads == 21 + 9
+    assert check_quad_mesh(quads.points, quads.quads, area=3.0, rtol=1e-9) == []
+    left = quads.points[:, 0] < 2.5
+    assert grid_points(quads.points[left], np.array([2 / 7, 1 / 3])) < 1e-5
+    assert grid_points(quads.points[~left] - [3, 0], 1 / 3) < 1e-5
