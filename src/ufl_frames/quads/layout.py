@@ -587,10 +587,11 @@ def _cut_pieces(pieces, cuts):
     for f, p0, p1, d in pieces:
         length = _piece_length((f, p0, p1, d))
         start = p0
-        while cuts and cuts[0] < at + length:
+        while cuts and cuts[0] <= at + length:  # no piece of length 0 at a cut
             s = cuts.pop(0) - at
             X = (p0[0] + s * d[0], p0[1] + s * d[1])
-            current.append((f, start, X, d))
+            if X != start:
+                current.append((f, start, X, d))
             out.append(current)
             current, start = [], X
         if start != p1:
@@ -671,13 +672,10 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
                 if a[0] != b[0] and a[1] != b[1]:
                     raise LayoutError("a boundary edge is not on an iso-line of the map")
                 d = (int(np.sign(b[0] - a[0])), int(np.sign(b[1] - a[1])))
-                s1 = s2 if j == index2 and s0 < s2 else Fraction(1)
-                if j == index2 and s0 < s2:
-                    at = stop
+                if j == index2 and s0 < s2:  # the next event is on this edge
+                    s1, at = s2, stop
                 else:
-                    at = ((j + 1) % len(loop), Fraction(0))
-                    if at == stop:
-                        pass
+                    s1, at = Fraction(1), ((j + 1) % len(loop), Fraction(0))
                 X0 = (a[0] + s0 * (b[0] - a[0]), a[1] + s0 * (b[1] - a[1]))
                 X1 = (a[0] + s1 * (b[0] - a[0]), a[1] + s1 * (b[1] - a[1]))
                 if X0 != X1:
