@@ -21,8 +21,13 @@ into rectangles of the parameter plane:
    through a vertex goes on into the fan sector that contains its direction; across a seam
    point and direction turn with the transition), and stops at the boundary, at a singular
    vertex, or where it first meets an earlier trace or itself (the motorcycle rule, one
-   trace after the other). A folded triangle or a trace longer than ``max_steps`` stops it
-   with a failure that the layout reports;
+   trace after the other). Exact coincidences are decided exactly: a trace that reaches a
+   singular vertex along one of its axis directions takes that separatrix (it is not
+   traced again), one that runs into an earlier trace along its line stops where they
+   first touch, one that would repeat an earlier trace from its origin is empty, and
+   traces that meet at a mesh vertex meet there. A folded triangle (or a singular vertex
+   whose fan does not hold 4 − turn axis directions) or a trace longer than
+   ``max_steps`` stops it with a failure that the layout reports;
 3. **patches and arcs** (:func:`layout`): the traces and boundary curves split at their
    meeting points are the arcs (graph edges); at every node the arcs' directions in
    quarter turns (unwrapped around a vertex's fan); the faces traced by turning left. A
