@@ -46,9 +46,15 @@ from fractions import Fraction
 import numpy as np
 import scipy.sparse as sp
 
-from ufl_frames.param.seamless import Parametrisation, least_squares_system
+from ufl_frames.param.seamless import (
+    Parametrisation,
+    least_squares_system,
+    parametrisation,
+    quarter_turn,
+)
 
-__all__ = ["Arc", "Layout", "LayoutError", "Motorcycles", "Trace", "fixed_point", "layout"]
+__all__ = ["Arc", "Layout", "LayoutError", "Motorcycles", "Trace", "fixed_point", "layout",
+           "untangle"]
 
 #: Fixed-point units per unit of the map.
 UNIT = 2**20
@@ -565,7 +571,8 @@ class Layout:
     ``folded`` the triangles where the map folds (no trace crosses them, but the quads
     of their patch may be poor there); ``unlocated`` how many quad points
     :func:`~ufl_frames.quads.patches.patch_quads` could not find in the map (lost in a
-    fold: placed approximately)."""
+    fold: placed approximately); ``untangled`` how many triangles folded before
+    :func:`untangle` (:func:`~ufl_frames.quads.patches.quads_of_map` does it first)."""
 
     arcs: list
     nodes: list
@@ -574,6 +581,7 @@ class Layout:
     motorcycles: Motorcycles
     folded: np.ndarray
     unlocated: int = 0
+    untangled: int = 0
 
     def lengths(self) -> np.ndarray:
         return np.array([a.length for a in self.arcs])
@@ -805,3 +813,57 @@ def _faces(arcs, ends, total):
         raise LayoutError(f"{len(bad)} faces of the traces are not rectangles (corner "
                           f"quarter turns {bad[:3]})")
     return patches
+
+
+def untangle(param: Parametrisation, rounds: int = 200, rings: int = 3):
+    """The seamless map with its folds smoothed out where it can: every interior vertex
+    (not singular) within ``rings`` rings of a folded triangle moved, ``rounds`` times at
+    most, to the mean of its neighbours in its own chart (all its wedges together, each
+    by its transition, so the map stays seamless; the boundary and the singular vertices
+    stay): a Tutte-like relaxation of the folded region.
+
+    Args:
+        param: the seamless map.
+        rounds: the most relaxation sweeps.
+        rings: how far around the folded triangles vertices move.
+
+    Returns:
+        (the new map, the number of triangles still folded).
+    """
+    mesh = param.mesh
+    cells, corners = mesh.cells, mesh.corners
+    uv = param.uv.copy()
+
+    def folded_now():
+        C = uv[corners]
+        return ((C[:, 1, 0] - C[:, 0, 0]) * (C[:, 2, 1] - C[:, 0, 1])
+                - (C[:, 1, 1] - C[:, 0, 1]) * (C[:, 2, 0] - C[:, 0, 0])) <= 0
+
+    bad = folded_now()
+    if not bad.any():
+        return param, 0
+    mc = Motorcycles(param, P=np.zeros((mesh.num_wedges, 2), dtype=np.int64))
+    region = np.zeros(mesh.x.shape[0], dtype=bool)
+    region[cells[bad].ravel()] = True
+    for _ in range(rings):
+        region[cells[region[cells].any(axis=1)].ravel()] = True
+    region &= ~mc.on_boundary
+    region[mesh.singular] = False
+    # per vertex: (its wedge, the other two corners' wedges, rotation to the fan's first)
+    fans = [(v, [(int(corners[f, loc]), int(corners[f, (loc + 1) % 3]),
+                  int(corners[f, (loc + 2) % 3]), quarter_turn(kappa))
+                 for f, loc, kappa in mc.fan(v)]) for v in np.flatnonzero(region).tolist()]
+    for sweep in range(rounds):
+        for _, fan in fans:
+            ref = uv[fan[0][0]]
+            total, shifts = np.zeros(2), {}
+            for w, a, b, R in fan:
+                t = ref - R @ uv[w]  # the transition of this wedge's chart to the first's
+                shifts[w] = (R, t)
+                total += R @ (uv[a] + uv[b]) + 2 * t
+            mean = total / (2 * len(fan))
+            for w, (R, t) in shifts.items():
+                uv[w] = R.T @ (mean - t)
+        if sweep % 10 == 9 and not folded_now().any():
+            break
+    return parametrisation(mesh, uv, param.scale), int(np.count_nonzero(folded_now()))

@@ -32,9 +32,17 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import csgraph
 
 from ufl_frames.param import cut, seamless
-from ufl_frames.param.seamless import Parametrisation
+from ufl_frames.param.seamless import Parametrisation, folded
 from ufl_frames.quads.extract import QuadMesh
-from ufl_frames.quads.layout import UNIT, Layout, LayoutError, _piece_length, _rot, layout
+from ufl_frames.quads.layout import (
+    UNIT,
+    Layout,
+    LayoutError,
+    _piece_length,
+    _rot,
+    layout,
+    untangle,
+)
 
 __all__ = ["COLLAPSE_BELOW", "components", "integer_lengths", "patch_quads", "quads_of_field",
            "quads_of_map"]
@@ -419,10 +427,16 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
 
 def quads_of_map(param: Parametrisation,
                  collapse_below: float = COLLAPSE_BELOW) -> tuple[QuadMesh, Layout, np.ndarray]:
-    """The quad mesh of the seamless map ``param`` by its T-mesh: :func:`~ufl_frames.quads.
-    layout.layout`, :func:`integer_lengths` (arcs shorter than ``collapse_below`` may
-    collapse), :func:`patch_quads`. Returns the quads, the layout and the arc lengths."""
+    """The quad mesh of the seamless map ``param`` by its T-mesh: its folds smoothed out
+    where they can be (:func:`~ufl_frames.quads.layout.untangle`), :func:`~ufl_frames.
+    quads.layout.layout`, :func:`integer_lengths` (arcs shorter than ``collapse_below``
+    may collapse), :func:`patch_quads`. Returns the quads, the layout and the arc
+    lengths."""
+    folds = int(np.count_nonzero(folded(param)))
+    if folds:
+        param, _ = untangle(param)
     lay = layout(param)
+    lay.untangled = folds
     n = integer_lengths(lay, collapse_below=collapse_below)
     return patch_quads(lay, n), lay, n
 
