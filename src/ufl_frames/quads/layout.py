@@ -696,8 +696,14 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
             arcs.append(Arc(pieces, node(key), node(key2),
                             float(sum(_piece_length(p) for p in pieces)) / UNIT, True))
     nodes = list(node_id)
-    ends, total = _node_ends(mc, arcs, nodes)
-    patches = _faces(arcs, ends, total)
+    try:
+        ends, total = _node_ends(mc, arcs, nodes)
+        patches = _faces(arcs, ends, total)
+    except LayoutError as e:
+        if not mc.folded.any():
+            raise
+        raise LayoutError(f"{e} (the seamless map folds on {int(mc.folded.sum())} "
+                          "triangles)") from e
     return Layout(arcs=arcs, nodes=nodes, patches=patches, traces=traces, motorcycles=mc,
                   folded=np.flatnonzero(mc.folded))
 
