@@ -133,6 +133,7 @@ class _Points:
         self.count = count
         self.parent = list(range(count))
         self.events = []  # (zero arcs, point pairs they glue)
+        self.lost = []  # zero arcs of patches collapsed between two boundary sides
         for a, (arc, k) in enumerate(zip(lay.arcs, n.tolist(), strict=True)):
             if k == 0:
                 self.events.append(([a], [(arc.start, arc.end)]))
@@ -149,12 +150,15 @@ class _Points:
             W, H = len(runs[0]) - 1, len(runs[1]) - 1
             if len(runs[2]) - 1 != W or len(runs[3]) - 1 != H:
                 raise LayoutError("a patch's opposite sides have different integer lengths")
-            if W == 0:  # collapsed across: its right side is its left side
-                self.events.append(([h // 2 for h in sides[0] + sides[2]],
-                                    list(zip(runs[1], runs[3][::-1], strict=True))))
-            if H == 0:
-                self.events.append(([h // 2 for h in sides[1] + sides[3]],
-                                    list(zip(runs[0], runs[2][::-1], strict=True))))
+            for s, width in ((0, W), (1, H)):  # collapsed: two sides become one
+                if width:
+                    continue
+                across = [h // 2 for h in sides[s] + sides[s + 2]]
+                self.events.append((across, list(zip(runs[s + 1], runs[(s + 3) % 4][::-1],
+                                                     strict=True))))
+                glued = sides[s + 1] + sides[(s + 3) % 4]
+                if all(lay.arcs[h // 2].boundary for h in glued):
+                    self.lost += across  # boundary onto boundary: the patch is lost
             self.runs.append(runs)
         for _, pairs in self.events:
             for a, b in pairs:
@@ -184,7 +188,8 @@ class _Points:
         """The zero arcs of the glues that put on one point two singular vertices, a
         singular vertex and the boundary, two boundary points not joined along the
         boundary by zero arcs (a part of the domain collapsed), or two neighbouring points
-        of a patch that keeps its quads."""
+        of a patch that keeps its quads; and those of a patch collapsed between two sides
+        on the boundary (the patch would be lost)."""
         mc = self.lay.motorcycles
         along = list(range(self.count))  # union–find of the zero boundary arcs alone
 
@@ -215,7 +220,8 @@ class _Points:
                     bad.add(root)
                 seen.add(root)
         return sorted({a for arcs, pairs in self.events
-                       if any(self.find(p) in bad for p, _ in pairs) for a in arcs})
+                       if any(self.find(p) in bad for p, _ in pairs) for a in arcs}
+                      | set(self.lost))
 
 
 def _physical(mc, f, X):
@@ -400,7 +406,10 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
         quads.append(np.stack([g[:-1, :-1], g[1:, :-1], g[1:, 1:], g[:-1, 1:]],
                               axis=-1).reshape(-1, 4))
     lay.unlocated = lost
-    quads = np.concatenate(quads) if quads else np.zeros((0, 4), dtype=np.int64)
+    if not quads:
+        raise LayoutError("no quads at this size (every patch collapses): take a smaller "
+                          "quad size")
+    quads = np.concatenate(quads)
     # glued points: one point each, the singular vertex's, else the boundary's, else the mean
     total = len(position)
     root = np.array([pts.find(i) if i < pts.count else i for i in range(total)])
