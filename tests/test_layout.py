@@ -428,3 +428,15 @@ def test_two_components_each_get_their_grid():
     left = quads.points[:, 0] < 2.5
     assert grid_points(quads.points[left], np.array([2 / 7, 1 / 3])) < 1e-5
     assert grid_points(quads.points[~left] - [3, 0], 1 / 3) < 1e-5
+
+
+def test_anisotropic_frames_set_the_two_counts():
+    """Frames (l1, l2) = (1, 0.25) on [0, 2] × [0, 1] at s = 1.5: U advances 1.5 per unit
+    length, V 6: one patch of 3 × 6 quads (in either labelling), each 2/3 × 1/6."""
+    x, cells = grid(10, 10, 0, 2, 0, 1)
+    mesh = cut.cut_mesh(x, cells, constant_field(x, (1.0, 0.25)))
+    quads, lay, n = patches.quads_of_map(seamless.integrate(mesh, 1.5))
+    assert len(lay.patches) == 1 and sorted(n.tolist()) == [3, 3, 6, 6]
+    assert quads.num_quads == 18
+    assert check_quad_mesh(quads.points, quads.quads, area=2.0, rtol=1e-9) == []
+    assert grid_points(quads.points, np.array([2 / 3, 1 / 6])) < 1e-5
