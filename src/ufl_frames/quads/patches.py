@@ -9,8 +9,11 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    nearly collinear traces then collapses, its long sides glued point by point, which
    lines the two traces up (the separatrices of nearby singularities join). Other arcs
    get at least 1. Where a collapse would put two singular vertices, or a singular vertex
-   and the boundary, on one point, the arcs collapsed there get at least 1 and the program
-   is solved again (until none does);
+   and the boundary, on one point, glue two parts of the boundary (or a patch between two
+   boundary sides) together, or leave a kept patch with two corners on one point, the
+   arcs collapsed there get at least 1 and the program is solved again (until none does).
+   With every arc at least 1 (``collapse_below=0``) a solution always exists: the real
+   lengths solve the equalities, so the rational cone they span holds integer points;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
    integer positions along each arc (uniform in the map), the inside by transfinite
    (Coons) blending in the patch's rectangle of the parameter plane, and every point
