@@ -1,4 +1,6 @@
 """From an integer-grid map to a quad mesh: extraction (:mod:`.extract`), the worst quads
 improved (:mod:`.improve`), measures of a quad mesh (:mod:`.measures`) and its files
-(:mod:`.msh`). Extraction, improvement and measures are pure NumPy; :mod:`.msh` uses Gmsh
-and matplotlib."""
+(:mod:`.msh`); from a seamless map to a quad mesh by its T-mesh, valid by construction:
+the motorcycle graph and its rectangular patches (:mod:`.layout`), integer arc lengths
+and the quads of every patch (:mod:`.patches`). All pure NumPy/SciPy but :mod:`.msh`,
+which uses Gmsh and matplotlib."""

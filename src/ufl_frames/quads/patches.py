@@ -1,0 +1,498 @@
+r"""Integer arc lengths of a T-mesh layout and the quads of its patches: the quantisation
+of a seamless map that cannot fold (Quantized Global Parametrization, Campen–Bommes–
+Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
+
+1. **integer arc lengths** (:func:`integer_lengths`): n_a ≥ 0 per arc with, per patch, the
+   arcs of opposite sides summing to the same integer, minimising Σ w_a |n_a − L_a| (L_a
+   the arc's length in the map, w_a = 1), a small integer program (SciPy's HiGHS
+   ``milp``). An arc shorter than ``collapse_below`` may get 0: a thin patch between two
+   nearly collinear traces then collapses, its long sides glued point by point, which
+   lines the two traces up (the separatrices of nearby singularities join). Other arcs
+   get at least 1. Where a collapse would put two singular vertices, or a singular vertex
+   and the boundary, on one point, glue two parts of the boundary (or a patch between two
+   boundary sides) together, or leave a kept patch with two corners on one point, the
+   arcs collapsed there get at least 1 and the program is solved again (until none does).
+   With every arc at least 1 (``collapse_below=0``) a solution always exists: the real
+   lengths solve the equalities, so the rational cone they span holds integer points;
+2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
+   integer positions along each arc (uniform in the map), the inside by transfinite
+   (Coons) blending in the patch's rectangle of the parameter plane, and every point
+   mapped back to the plane by walking the triangles of the map from the patch's corner
+   (straight segments in the patch's chart, across seams). Arc points are computed once,
+   so the patches that share an arc share its points: the quads are conforming; points
+   glued by a collapse become one (the singular vertex's, the boundary's, or their mean).
+
+Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map,
+:func:`quads_of_field` from a frame field on a mesh of one or more components (each cut
+and integrated on its own).
+"""
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.sparse import csgraph
+
+from ufl_frames.param import cut, seamless
+from ufl_frames.param.seamless import Parametrisation, folded
+from ufl_frames.quads.extract import QuadMesh
+from ufl_frames.quads.layout import (
+    UNIT,
+    Layout,
+    LayoutError,
+    _piece_length,
+    _rot,
+    layout,
+    untangle,
+)
+
+__all__ = ["COLLAPSE_BELOW", "components", "integer_lengths", "patch_quads", "quads_of_field",
+           "quads_of_map"]
+
+#: Arcs shorter than this (in quads) may get length 0 (:func:`integer_lengths`).
+COLLAPSE_BELOW = 0.5
+
+
+def _solve(lay: Layout, lower: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """min Σ w |n − L| over integers n ≥ ``lower`` with equal opposite sides per patch.
+
+    Args:
+        lay: the layout (L its arc lengths).
+        lower: per arc its lower bound (0 or 1).
+        weights: per arc w.
+
+    Returns:
+        n (A,) int64; raises :class:`LayoutError` where there is none.
+    """
+    L = lay.lengths()
+    A = L.size
+    rows, cols, vals, count = [], [], [], 0
+    for sides in lay.patches:
+        for s in (0, 1):
+            for side, sign in ((sides[s], 1.0), (sides[s + 2], -1.0)):
+                for h in side:
+                    rows.append(count)
+                    cols.append(h // 2)
+                    vals.append(sign)
+            count += 1
+    eye = sp.identity(A, format="csr")
+    blocks = [LinearConstraint(sp.hstack([eye, -eye]), -np.inf, L),
+              LinearConstraint(sp.hstack([-eye, -eye]), -np.inf, -L)]
+    if count:
+        E = sp.csr_matrix((vals, (rows, cols)), shape=(count, A))
+        E.sum_duplicates()
+        blocks.append(LinearConstraint(sp.hstack([E, sp.csr_matrix((count, A))]), 0, 0))
+    result = milp(np.concatenate([np.zeros(A), weights]), constraints=blocks,
+                  integrality=np.concatenate([np.ones(A), np.zeros(A)]),
+                  bounds=Bounds(np.concatenate([lower, np.zeros(A)]), np.inf))
+    if result.status != 0 or result.x is None:
+        raise LayoutError("no integer arc lengths with equal opposite sides in every patch "
+                          f"({result.message})")
+    return np.rint(result.x[:A]).astype(np.int64)
+
+
+def integer_lengths(lay: Layout, weights=None,
+                    collapse_below: float = COLLAPSE_BELOW) -> np.ndarray:
+    """Integer lengths n (one per arc of ``lay``) with equal opposite sides per patch,
+    closest to the arcs' lengths (see the module text, step 1).
+
+    Args:
+        lay: the layout.
+        weights: w_a per arc (default 1).
+        collapse_below: arcs shorter than this may get 0 (0: every arc at least 1).
+
+    Returns:
+        n (A,) int64. Raises :class:`~ufl_frames.quads.layout.LayoutError` where there is
+        no solution.
+    """
+    L = lay.lengths()
+    w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
+    lower = np.where(L < collapse_below, 0.0, 1.0)
+    for _ in range(L.size + 1):
+        n = _solve(lay, lower, w)
+        points = _Points(lay, n)
+        bad = points.bad_merges()
+        if not bad:
+            return n
+        lower[bad] = 1.0
+    raise LayoutError("the collapses of thin patches keep merging singular vertices")
+
+
+class _Points:
+    """The points of the quads of ``lay`` at lengths ``n`` before any is placed: the
+    nodes (ids 0 … N − 1), then each arc's inner points; per arc its n + 1 ids (one for a
+    zero arc, whose ends are glued); the glue (union–find) of zero arcs and collapsed
+    patches; per patch its four sides as runs of ids."""
+
+    def __init__(self, lay: Layout, n: np.ndarray):
+        self.lay, self.n = lay, n
+        count = len(lay.nodes)
+        self.arc_ids = []
+        for arc, k in zip(lay.arcs, n.tolist(), strict=True):
+            inner = list(range(count, count + max(k - 1, 0)))
+            count += len(inner)
+            self.arc_ids.append([arc.start] + inner + ([arc.end] if k > 0 else []))
+        self.count = count
+        self.parent = list(range(count))
+        self.events = []  # (zero arcs, point pairs they glue)
+        self.lost = []  # zero arcs of patches collapsed between two boundary sides
+        for a, (arc, k) in enumerate(zip(lay.arcs, n.tolist(), strict=True)):
+            if k == 0:
+                self.events.append(([a], [(arc.start, arc.end)]))
+        self.runs = []
+        for sides in lay.patches:
+            runs = []
+            for side in sides:
+                ids = []
+                for h in side:
+                    seq = self.arc_ids[h // 2]
+                    seq = seq if h % 2 == 0 else seq[::-1]
+                    ids += seq if not ids else seq[1:]
+                runs.append(ids)
+            W, H = len(runs[0]) - 1, len(runs[1]) - 1
+            if len(runs[2]) - 1 != W or len(runs[3]) - 1 != H:
+                raise LayoutError("a patch's opposite sides have different integer lengths")
+            for s, width in ((0, W), (1, H)):  # collapsed: two sides become one
+                if width:
+                    continue
+                across = [h // 2 for h in sides[s] + sides[s + 2]]
+                self.events.append((across, list(zip(runs[s + 1], runs[(s + 3) % 4][::-1],
+                                                     strict=True))))
+                glued = sides[s + 1] + sides[(s + 3) % 4]
+                if all(lay.arcs[h // 2].boundary for h in glued):
+                    self.lost += across  # boundary onto boundary: the patch is lost
+            self.runs.append(runs)
+        for _, pairs in self.events:
+            for a, b in pairs:
+                self.union(a, b)
+
+    def find(self, a):
+        root = a
+        while self.parent[root] != root:
+            root = self.parent[root]
+        while self.parent[a] != root:
+            self.parent[a], a = root, self.parent[a]
+        return root
+
+    def union(self, a, b):
+        a, b = self.find(a), self.find(b)
+        if a != b:
+            self.parent[max(a, b)] = min(a, b)
+
+    def boundary_ids(self) -> set:
+        out = set()
+        for arc, ids in zip(self.lay.arcs, self.arc_ids, strict=True):
+            if arc.boundary:
+                out.update(ids)
+        return out
+
+    def bad_merges(self) -> list:
+        """The zero arcs of the glues that put on one point two singular vertices, a
+        singular vertex and the boundary, two boundary points not joined along the
+        boundary by zero arcs (a part of the domain collapsed), or two neighbouring points
+        of a patch that keeps its quads; and those of a patch collapsed between two sides
+        on the boundary (the patch would be lost)."""
+        mc = self.lay.motorcycles
+        along = list(range(self.count))  # union–find of the zero boundary arcs alone
+
+        def find(a):
+            while along[a] != a:
+                along[a] = along[along[a]]
+                a = along[a]
+            return a
+
+        for arc, k in zip(self.lay.arcs, self.n.tolist(), strict=True):
+            if k == 0 and arc.boundary:
+                along[max(find(arc.start), find(arc.end))] = min(find(arc.start),
+                                                                 find(arc.end))
+        pieces: dict = {}
+        for i in self.boundary_ids():
+            pieces.setdefault(self.find(i), set()).add(find(i))
+        bad = {root for root, parts in pieces.items() if len(parts) > 1}
+        for runs in self.runs:  # a patch left with quads whose two corners are one point
+            if len(runs[0]) > 1 and len(runs[1]) > 1:
+                for ids in runs:
+                    bad.update(self.find(u) for u, v in zip(ids, ids[1:], strict=False)
+                               if self.find(u) == self.find(v))
+        seen = set()
+        for i, key in enumerate(self.lay.nodes):
+            if key[0] == "v" and key[1] in mc.singular:
+                root = self.find(i)
+                if root in seen or root in pieces:
+                    bad.add(root)
+                seen.add(root)
+        return sorted({a for arcs, pairs in self.events
+                       if any(self.find(p) in bad for p, _ in pairs) for a in arcs}
+                      | set(self.lost))
+
+
+def _physical(mc, f, X):
+    """The plane point of a chart point.
+
+    Args:
+        mc: the tracer (charts).
+        f: the triangle.
+        X: the point in f's chart (floats, fixed-point units).
+
+    Returns:
+        (2,) array.
+    """
+    A = np.array(mc.pts[f], dtype=float)
+    T = np.array([A[1] - A[0], A[2] - A[0]]).T
+    b = np.linalg.solve(T, np.asarray(X, dtype=float) - A[0])
+    lam = np.array([1 - b.sum(), b[0], b[1]])
+    return lam @ mc.mesh.x[mc.cells[f]]
+def _arc_points(mc, arc, n):
+    """The inner points of an arc at its lengths k/n, k = 1 … n − 1 (uniform in the map).
+
+    Args:
+        mc: the tracer (charts).
+        arc: the arc.
+        n: its integer length.
+
+    Returns:
+        A list of n − 1 plane points.
+    """
+    lengths = [float(_piece_length(p)) for p in arc.pieces]
+    total = sum(lengths)
+    out, j, at = [], 0, 0.0
+    for k in range(1, n):
+        s = total * k / n
+        while j < len(lengths) - 1 and at + lengths[j] < s:
+            at += lengths[j]
+            j += 1
+        f, p0, _, d = arc.pieces[j]
+        out.append(_physical(mc, f, (float(p0[0]) + (s - at) * d[0],
+                                     float(p0[1]) + (s - at) * d[1])))
+    return out
+
+
+def _bary(A, X):
+    """Barycentric coordinates of X in the triangle A (three float pairs)."""
+    (a0, a1), (b0, b1), (c0, c1) = A
+    det = (b0 - a0) * (c1 - a1) - (b1 - a1) * (c0 - a0)
+    x0, x1 = X
+    l0 = ((c0 - b0) * (x1 - b1) - (c1 - b1) * (x0 - b0)) / det
+    l1 = ((a0 - c0) * (x1 - c1) - (a1 - c1) * (x0 - c0)) / det
+    return (l0, l1, 1.0 - l0 - l1)
+
+
+def _walk(mc, state, q, max_steps):
+    """Walk straight from the state's point to q across triangles (and seams), in pure
+    Python floats (the inner loop of the quads).
+
+    Args:
+        mc: the tracer (charts, neighbours, transitions).
+        state: (triangle, quarter turns and shift from its chart to the walking frame,
+            point in the walking frame).
+        q: the target in the walking frame.
+        max_steps: the most triangles to cross.
+
+    Returns:
+        (state at q, plane point of q), or (None, None) if the walk got lost (in a fold).
+    """
+    f, k, t, p = state
+    entry = -1
+    fpts, nb, xs = mc.float_pts, mc.nb, mc.float_x
+    for _ in range(max_steps):
+        A = [_rot(k, c) for c in fpts[f]]
+        A = [(a[0] + t[0], a[1] + t[1]) for a in A]
+        lq = _bary(A, q)
+        if min(lq) >= -1e-12:
+            x = xs[f]
+            return (f, k, t, q), (lq[0] * x[0][0] + lq[1] * x[1][0] + lq[2] * x[2][0],
+                                  lq[0] * x[0][1] + lq[1] * x[1][1] + lq[2] * x[2][1])
+        lp = _bary(A, p)
+        best, i_best = math.inf, -1
+        for i in range(3):
+            if lq[i] < 0 and i != entry:
+                s = lp[i] / (lp[i] - lq[i])
+                if s < best:
+                    best, i_best = s, i
+        if i_best < 0:
+            i_best, best = min(range(3), key=lambda i: lq[i]), 0.0
+        best = max(best, 0.0)
+        p = (p[0] + best * (q[0] - p[0]), p[1] + best * (q[1] - p[1]))
+        g = nb[f][i_best]
+        if g < 0:  # q is outside (round-off on the boundary): stop where the walk left
+            lp = [max(v, 0.0) for v in _bary(A, p)]
+            total = sum(lp)
+            x = xs[f]
+            return (f, k, t, p), tuple(sum(lp[i] * x[i][c] for i in range(3)) / total
+                                       for c in range(2))
+        j, e = mc.turn[f][i_best], mc.shift[f][i_best]
+        k2 = (k - j) % 4
+        e = _rot(k2, e)
+        t = (t[0] - e[0], t[1] - e[1])
+        entry = nb[g].index(f) if nb[g].count(f) == 1 else -1
+        f, k = g, k2
+    return None, None  # lost (in a fold): the caller tries another way
+
+
+def _walk_point(mc, state):
+    """The plane point of a walk's state (its point clamped into its triangle)."""
+    f, k, t, p = state
+    A = [_rot(k, c) for c in mc.float_pts[f]]
+    lam = [max(v, 0.0) for v in _bary([(a[0] + t[0], a[1] + t[1]) for a in A], p)]
+    x = mc.float_x[f]
+    return tuple(sum(lam[i] * x[i][c] for i in range(3)) / sum(lam) for c in range(2))
+
+
+def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
+    """The quads of every patch of ``lay`` for the integer arc lengths ``n``
+    (:func:`integer_lengths`; see the module text, step 2). A point whose walk gets lost
+    in a fold of the map (one that no trace crosses) is walked to again from the patch's
+    corner, else placed where the walk was; ``lay.unlocated`` counts those."""
+    mc = lay.motorcycles
+    pts = _Points(lay, n)
+    position = [None] * pts.count
+    for arc in lay.arcs:
+        for node, (f, X) in ((arc.start, arc.pieces[0][:2]),
+                             (arc.end, (arc.pieces[-1][0], arc.pieces[-1][2]))):
+            if position[node] is None:
+                position[node] = _physical(mc, f, (float(X[0]), float(X[1])))
+    for a, arc in enumerate(lay.arcs):
+        for i, p in zip(pts.arc_ids[a][1:-1], _arc_points(mc, arc, int(n[a])), strict=True):
+            position[i] = p
+    quads, lost = [], 0
+    steps = 50 * int(math.sqrt(len(mc.cells))) + 1000  # a walk longer than this is lost
+    for sides, runs in zip(lay.patches, pts.runs, strict=True):
+        W, H = len(runs[0]) - 1, len(runs[1]) - 1
+        if W == 0 or H == 0:
+            continue
+        lengths = []
+        for side in sides:
+            pos = [0.0]
+            for h in side:
+                k = int(n[h // 2])
+                step = lay.arcs[h // 2].length / k if k else 0.0
+                pos += [pos[-1] + step * (j + 1) for j in range(k)]
+            lengths.append(np.array(pos))
+        Lw, Lh = lengths[0][-1], lengths[1][-1]
+        bottom = np.stack([lengths[0], np.zeros(W + 1)], axis=1)
+        right = np.stack([np.full(H + 1, Lw), lengths[1]], axis=1)
+        top = np.stack([Lw - lengths[2], np.full(W + 1, Lh)], axis=1)[::-1]
+        left = np.stack([np.zeros(H + 1), Lh - lengths[3]], axis=1)[::-1]
+        grid = np.full((W + 1, H + 1), -1, dtype=np.int64)
+        grid[:, 0], grid[W, :] = runs[0], runs[1]
+        grid[:, H], grid[0, :] = runs[2][::-1], runs[3][::-1]
+        # the walking frame: the chart of the first piece at corner (0, 0)
+        h = sides[0][0]
+        arc = lay.arcs[h // 2]
+        if h % 2 == 0:
+            f, X0, _, d = arc.pieces[0]
+        else:
+            f, _, X0, d = arc.pieces[-1]
+            d = (-d[0], -d[1])
+        origin = (float(X0[0]), float(X0[1]))
+        state = start = (f, 0, (0.0, 0.0), origin)
+        for j in range(1, H):
+            v = j / H
+            for i in (range(1, W) if j % 2 else range(W - 1, 0, -1)):
+                u = i / W
+                x, y = ((1 - v) * bottom[i] + v * top[i] + (1 - u) * left[j] + u * right[j]
+                        - ((1 - u) * (1 - v) * bottom[0] + u * (1 - v) * bottom[W]
+                           + (1 - u) * v * top[0] + u * v * top[W]))
+                q = (origin[0] + UNIT * (x * d[0] - y * d[1]),
+                     origin[1] + UNIT * (x * d[1] + y * d[0]))
+                moved, point = _walk(mc, state, q, steps)
+                if moved is None:  # lost in a fold: from the corner instead, else approximate
+                    moved, point = _walk(mc, start, q, steps)
+                if moved is None:
+                    lost += 1
+                    moved, point = state, _walk_point(mc, state)
+                state = moved
+                grid[i, j] = len(position)
+                position.append(point)
+        g = grid
+        quads.append(np.stack([g[:-1, :-1], g[1:, :-1], g[1:, 1:], g[:-1, 1:]],
+                              axis=-1).reshape(-1, 4))
+    lay.unlocated = lost
+    if not quads:
+        raise LayoutError("no quads at this size (every patch collapses): take a smaller "
+                          "quad size")
+    quads = np.concatenate(quads)
+    # glued points: one point each, the singular vertex's, else the boundary's, else the mean
+    total = len(position)
+    root = np.array([pts.find(i) if i < pts.count else i for i in range(total)])
+    rank = np.full(total, 2)
+    rank[list(pts.boundary_ids())] = 1
+    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 0
+    xy = np.array([np.asarray(p, dtype=float) for p in position])
+    used, quads = np.unique(root[quads], return_inverse=True)
+    quads = quads.reshape(-1, 4)
+    best = np.full(total, 3)
+    np.minimum.at(best, root, rank)
+    chosen = rank == best[root]
+    sums = np.zeros((total, 2))
+    np.add.at(sums, root[chosen], xy[chosen])
+    counts = np.bincount(root[chosen], minlength=total)
+    points = sums[used] / counts[used, None]
+    a, b = quads.ravel(), np.roll(quads, -1, axis=1).ravel()
+    m = points.shape[0]
+    pairs, counts = np.unique(np.minimum(a, b) * m + np.maximum(a, b), return_counts=True)
+    once = pairs[counts == 1]
+    return QuadMesh(points=points, quads=quads, chains={},
+                    boundary=np.stack([once // m, once % m], axis=1))
+
+
+def quads_of_map(param: Parametrisation,
+                 collapse_below: float = COLLAPSE_BELOW) -> tuple[QuadMesh, Layout, np.ndarray]:
+    """The quad mesh of the seamless map ``param`` by its T-mesh: its folds smoothed out
+    where they can be (:func:`~ufl_frames.quads.layout.untangle`), :func:`~ufl_frames.
+    quads.layout.layout`, :func:`integer_lengths` (arcs shorter than ``collapse_below``
+    may collapse), :func:`patch_quads`. Returns the quads, the layout and the arc
+    lengths."""
+    folds = int(np.count_nonzero(folded(param)))
+    if folds:
+        param, _ = untangle(param)
+    lay = layout(param)
+    lay.untangled = folds
+    n = integer_lengths(lay, collapse_below=collapse_below)
+    return patch_quads(lay, n), lay, n
+
+
+def components(cells: np.ndarray) -> list[np.ndarray]:
+    """The triangles (ids) of each connected component of the mesh (triangles joined
+    through their vertices), largest first."""
+    cells = np.asarray(cells)
+    n = int(cells.max()) + 1
+    a = cells.ravel()
+    b = np.roll(cells, -1, axis=1).ravel()
+    graph = sp.csr_matrix((np.ones(a.size), (a, b)), shape=(n, n))
+    _, label = csgraph.connected_components(graph, directed=False)
+    of_cell = label[cells[:, 0]]
+    groups = [np.flatnonzero(of_cell == c) for c in np.unique(of_cell)]
+    return sorted(groups, key=lambda g: -g.size)
+
+
+def quads_of_field(x, cells, q, scale: float, cancel_within: float | None = None):
+    """The quad mesh of the frame field ``q`` (n, 5) on the mesh ``x``, ``cells``, each
+    connected component cut (:func:`~ufl_frames.param.cut.cut_mesh`), integrated
+    (:func:`~ufl_frames.param.seamless.integrate`) and quadrangulated
+    (:func:`quads_of_map`) on its own, at one scale.
+
+    Args:
+        x, cells: the triangle mesh.
+        q: the P1 frame field's rows.
+        scale: quads per unit of the field's lengths (``seamless.scale_for_quad_size``).
+        cancel_within: passed to :func:`~ufl_frames.param.cut.cut_mesh`.
+
+    Returns:
+        (quads, layouts): one :class:`~ufl_frames.quads.extract.QuadMesh` of all the
+        components, and the layout of each.
+    """
+    x, cells, q = np.asarray(x, dtype=float)[:, :2], np.asarray(cells), np.asarray(q)
+    points, quads, boundary, layouts, offset = [], [], [], [], 0
+    for group in components(cells):
+        used, local = np.unique(cells[group], return_inverse=True)
+        mesh = cut.cut_mesh(x[used], local.reshape(-1, 3), q[used], cancel_within)
+        part, lay, _ = quads_of_map(seamless.integrate(mesh, scale))
+        points.append(part.points)
+        quads.append(part.quads + offset)
+        boundary.append(part.boundary + offset)
+        layouts.append(lay)
+        offset += part.points.shape[0]
+    return QuadMesh(points=np.concatenate(points), quads=np.concatenate(quads), chains={},
+                    boundary=np.concatenate(boundary)), layouts
