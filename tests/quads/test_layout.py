@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_param import annulus, annulus_field, grid
+from planar_meshes import annulus, annulus_field, grid
 from test_quads import constant_field, pair_field, wobble
 
 from ufl_frames.frames2d import odeco
