@@ -413,16 +413,14 @@ def test_an_integer_grid_map_gives_the_extracted_quads(case):
 
 
 def test_two_components_each_get_their_grid():
-    """Two rectangles apart, [0, 2] × [0, 1] and [3, 4] × [0, 1], in one mesh: each is cut
-    and integrated on its own (one mesh would not cut), 7 × 3 and 3 × 3 quads."""
+    """Two rectangles apart, [0, 2] × [0, 1] and [3, 4] × [0, 1], in one mesh: one cut mesh
+    with a map anchored on each component, a patch each, 7 × 3 and 3 × 3 quads."""
     a, cells_a = grid(8, 4, 0, 2, 0, 1)
     b, cells_b = grid(4, 4, 3, 4, 0, 1)
     x, cells = np.concatenate([a, b]), np.concatenate([cells_a, cells_b + a.shape[0]])
-    assert [g.size for g in patches.components(cells)] == [64, 32]
-    with pytest.raises(ValueError, match="not connected"):
-        cut.cut_mesh(x, cells, constant_field(x))
-    quads, layouts = patches.quads_of_field(x, cells, constant_field(x), 3.3)
-    assert [len(lay.patches) for lay in layouts] == [1, 1]
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    quads, lay, _ = patches.quads_of_map(seamless.integrate(mesh, 3.3))
+    assert len(lay.patches) == 2
     assert quads.num_quads == 21 + 9
     assert check_quad_mesh(quads.points, quads.quads, area=3.0, rtol=1e-9) == []
     left = quads.points[:, 0] < 2.5

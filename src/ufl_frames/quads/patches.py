@@ -22,9 +22,8 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    so the patches that share an arc share its points: the quads are conforming; points
    glued by a collapse become one (the singular vertex's, the boundary's, or their mean).
 
-Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map,
-:func:`quads_of_field` from a frame field on a mesh of one or more components (each cut
-and integrated on its own).
+Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map (of one or
+more connected components: each has its own patches).
 """
 
 import math
@@ -32,9 +31,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, milp
-from scipy.sparse import csgraph
 
-from ufl_frames.param import cut, seamless
 from ufl_frames.param.seamless import Parametrisation, folded
 from ufl_frames.quads.extract import QuadMesh
 from ufl_frames.quads.layout import (
@@ -47,8 +44,7 @@ from ufl_frames.quads.layout import (
     untangle,
 )
 
-__all__ = ["COLLAPSE_BELOW", "components", "integer_lengths", "patch_quads", "quads_of_field",
-           "quads_of_map"]
+__all__ = ["COLLAPSE_BELOW", "integer_lengths", "patch_quads", "quads_of_map"]
 
 #: Arcs shorter than this (in quads) may get length 0 (:func:`integer_lengths`).
 COLLAPSE_BELOW = 0.5
@@ -451,48 +447,3 @@ def quads_of_map(param: Parametrisation,
     lay.untangled = folds
     n = integer_lengths(lay, collapse_below=collapse_below)
     return patch_quads(lay, n), lay, n
-
-
-def components(cells: np.ndarray) -> list[np.ndarray]:
-    """The triangles (ids) of each connected component of the mesh (triangles joined
-    through their vertices), largest first."""
-    cells = np.asarray(cells)
-    n = int(cells.max()) + 1
-    a = cells.ravel()
-    b = np.roll(cells, -1, axis=1).ravel()
-    graph = sp.csr_matrix((np.ones(a.size), (a, b)), shape=(n, n))
-    _, label = csgraph.connected_components(graph, directed=False)
-    of_cell = label[cells[:, 0]]
-    groups = [np.flatnonzero(of_cell == c) for c in np.unique(of_cell)]
-    return sorted(groups, key=lambda g: -g.size)
-
-
-def quads_of_field(x, cells, q, scale: float, cancel_within: float | None = None):
-    """The quad mesh of the frame field ``q`` (n, 5) on the mesh ``x``, ``cells``, each
-    connected component cut (:func:`~ufl_frames.param.cut.cut_mesh`), integrated
-    (:func:`~ufl_frames.param.seamless.integrate`) and quadrangulated
-    (:func:`quads_of_map`) on its own, at one scale.
-
-    Args:
-        x, cells: the triangle mesh.
-        q: the P1 frame field's rows.
-        scale: quads per unit of the field's lengths (``seamless.scale_for_quad_size``).
-        cancel_within: passed to :func:`~ufl_frames.param.cut.cut_mesh`.
-
-    Returns:
-        (quads, layouts): one :class:`~ufl_frames.quads.extract.QuadMesh` of all the
-        components, and the layout of each.
-    """
-    x, cells, q = np.asarray(x, dtype=float)[:, :2], np.asarray(cells), np.asarray(q)
-    points, quads, boundary, layouts, offset = [], [], [], [], 0
-    for group in components(cells):
-        used, local = np.unique(cells[group], return_inverse=True)
-        mesh = cut.cut_mesh(x[used], local.reshape(-1, 3), q[used], cancel_within)
-        part, lay, _ = quads_of_map(seamless.integrate(mesh, scale))
-        points.append(part.points)
-        quads.append(part.quads + offset)
-        boundary.append(part.boundary + offset)
-        layouts.append(lay)
-        offset += part.points.shape[0]
-    return QuadMesh(points=np.concatenate(points), quads=np.concatenate(quads), chains={},
-                    boundary=np.concatenate(boundary)), layouts
