@@ -116,7 +116,8 @@ def quads_at(field, rows: np.ndarray) -> str:
     quality = quadrangulate(field).quality
     return (f"{quality['quads']} quads, {quality['irregular_vertices']} irregular vertices, "
             f"scaled Jacobian min {quality['min_sj']:.3f}, edge ratio max "
-            f"{quality['edge_length_ratio']['max']:.2f}, misfit {quality['misfit_quantised']:.4f}")
+            f"{quality['edge_length_ratio']['max']:.2f}, seamless misfit "
+            f"{quality['misfit_seamless']:.4f} ({quality['quantisation']})")
 
 
 def run(h: float, max_aspect: float, max_it: int, with_probe: bool = False,

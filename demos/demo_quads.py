@@ -13,18 +13,22 @@
 # The integer iso-lines of a parametrisation $(U, V)$ outline quads, but only if the map is
 # an *integer-grid map*: the grid $\mathbb{Z}^2$ must look the same from both sides of every
 # cut and fit the boundary. This demo takes the piano's optimised fields, isotropic and
-# non-isotropic, to quad meshes in two steps (`ufl_frames.pipeline.stages.quadrangulate`):
+# non-isotropic, to quad meshes (`ufl_frames.pipeline.stages.quadrangulate`):
 #
-# 1. **Quantisation** (`ufl_frames.param.quantise`). Three kinds of quantities of the
-#    seamless map become integers: the translation of every seam, the constant coordinate
-#    of every boundary curve, and both coordinates of every singular vertex. Greedy
-#    rounding fixes one at a time, the one whose rounding raises the least-squares energy
-#    least, and solves the map again after each (exactly, by a rank-one update of the
-#    quantities' covariance).
-# 2. **Extraction** (`ufl_frames.quads.extract`). The lines $U = i$ and $V = j$ are traced
-#    through the triangles in exact fixed-point arithmetic, joined across the cuts, and the
-#    faces they bound are the quads. A singular vertex of the field becomes a quad vertex
-#    with 3 or 5 edges; every other interior vertex has 4.
+# 1. **The T-mesh of the seamless map** (`ufl_frames.quads.layout`). From every singular
+#    vertex and concave corner, straight lines of the map (separatrices) are traced, in
+#    exact fixed-point arithmetic across the cuts, each until it meets the boundary or an
+#    earlier line (the motorcycle graph). The lines and the boundary cut the domain into
+#    patches that are rectangles in the map.
+# 2. **Integer lengths and quads** (`ufl_frames.quads.patches`). Every arc of the T-mesh
+#    gets an integer length, opposite sides of every patch the same total, as close to the
+#    map's lengths as possible (a small integer program); a grid of that many quads fills
+#    every patch, mapped back through the map. No rounding can fold the map here: this is
+#    valid by construction. Where the layout cannot be made (the map folds on a trace), the
+#    older path is taken: greedy rounding of the seams, boundary curves and singular
+#    vertices to integers (`ufl_frames.param.quantise`) and the integer iso-lines traced
+#    into quads (`ufl_frames.quads.extract`). A singular vertex of the field becomes a quad
+#    vertex with 3 or 5 edges; every other interior vertex has 4.
 # 3. **The worst quads improved** (`ufl_frames.quads.improve`): the interior vertices of
 #    quads with a scaled Jacobian under 0.8 are moved to raise the worst one around them.
 #
@@ -72,8 +76,14 @@ def report(name, found):
         f"{found['edge_length_ratio']['mean']:.2f} mean, mean edge "
         f"{found['mean_edge_length']:.4f} (asked {found['quad_size']:.4f}), "
         f"valid: {found['valid']}")
-    say(f"  misfit of the map: seamless {found['misfit_seamless']:.4f}, after rounding "
-        f"{found['misfit_quantised']:.4f} ({found['rounded']} quantities rounded)")
+    if found["quantisation"] == "layout":
+        say(f"  misfit of the seamless map {found['misfit_seamless']:.4f}; quantised on its "
+            f"T-mesh: {found['patches']} patches, {found['arcs']} arcs "
+            f"({found['collapsed_arcs']} collapsed)")
+    else:
+        say(f"  misfit of the map: seamless {found['misfit_seamless']:.4f}, after rounding "
+            f"{found['misfit_quantised']:.4f} ({found['rounded']} quantities rounded; "
+            f"the layout failed: {found['fallback_reason']})")
 
 
 # -

@@ -97,3 +97,42 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
                       quad_size=2.0), comm=COMM)
     COMM.Barrier()  # rank 0 removes what the run wrote (its checkpoint folder)
     assert not (out / "b").exists()
+
+
+SHAPES = {
+    # one surface whose loop runs along the slit y = 0.5, 0 <= x <= 0.5, and back
+    "slit": ("""Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {1, 1, 0};
+Point(4) = {0, 1, 0}; Point(5) = {0, 0.5, 0}; Point(6) = {0.5, 0.5, 0};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 5};
+Line(5) = {5, 6}; Line(6) = {5, 1};
+Curve Loop(1) = {1, 2, 3, 4, 5, -5, 6}; Plane Surface(1) = {1};
+""", 1.0, 5.0),
+    # two unit squares apart: two components
+    "two squares": ("""SetFactory("OpenCASCADE");
+Rectangle(1) = {0, 0, 0, 1, 1};
+Rectangle(2) = {2, 0, 0, 1, 1};
+""", 2.0, 8.0),
+}
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_a_slit_and_two_components_give_valid_quads(name, tmp_path):
+    """The conformal field of a square with a slit, and of two squares apart: valid quads
+    (the independent checks, the shape's Euler characteristic, no quad missing) whose
+    boundary is the shape's — the slit's two sides included (4 + 2 × 0.5) — on any number
+    of ranks."""
+    from ufl_frames.mesh import load
+    from ufl_frames.quads.measures import boundary_length
+
+    text, area, perimeter = SHAPES[name]
+    path = tmp_path / "shape.geo"
+    if COMM.rank == 0:
+        path.write_text(text)
+    COMM.barrier()
+    field = FrameField.initial(load(COMM, path, 0.05), isotropic=True).conformal()
+    quads = quadrangulate(field, 0.1)
+    assert quads.quality["valid"] and quads.quality["area_error"] < 1e-9
+    assert quads.quality["irregular_vertices"] == 0  # squares: grids, the slit along lines
+    if COMM.rank == 0:
+        assert boundary_length(quads.mesh.points, quads.mesh.quads) == pytest.approx(
+            perimeter, rel=1e-9)

@@ -180,23 +180,98 @@ def _euler(mesh) -> int:
 
 
 def _quad_mesh(mesh, size: float):
-    """(the quad mesh, its measures) of the cut mesh ``mesh`` at quad size ``size``."""
+    """(the quad mesh, its measures) of the cut mesh ``mesh`` at quad size ``size``: by
+    the T-mesh layout of the seamless map (:func:`~ufl_frames.quads.patches.quads_of_map`,
+    valid by construction where the map's traces do not fold), else by greedy rounding and
+    iso-line extraction (:func:`~ufl_frames.param.quantise.quantise`,
+    :func:`~ufl_frames.quads.extract.extract_quads`); the first whose quads pass the
+    checks (:func:`_problems`) is kept."""
     from ufl_frames.param import measures as param_measures
-    from ufl_frames.param import quantise, seamless
-    from ufl_frames.quads import extract, measures
-    from ufl_frames.quads.improve import improve_worst_quads
+    from ufl_frames.param import seamless
+    from ufl_frames.quads import measures
 
     start = time.perf_counter()
     scale = seamless.scale_for_quad_size(mesh, size)
-    grid_map = quantise.quantise(mesh, scale)
-    quantised = time.perf_counter()
-    quad_mesh = extract.extract_quads(grid_map)
-    extracted = time.perf_counter()
-    as_extracted = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
-    quad_mesh = replace(quad_mesh, points=improve_worst_quads(quad_mesh.points,
-                                                              quad_mesh.quads))
-    improved = time.perf_counter()
-    area = float(grid_map.param.area.sum())
+    seamless_map = seamless.integrate(mesh, scale)
+    integrated = time.perf_counter()
+    failures = []
+    for method in (_by_layout, _by_rounding):
+        begun = time.perf_counter()
+        try:
+            quad_mesh, record = method(mesh, seamless_map)
+        except ValueError as e:  # LayoutError, QuantisationError, ExtractionError
+            failures.append(f"{method.__doc__.split(':')[0]}: {_one_line(e)}")
+            continue
+        quantised = time.perf_counter()
+        quad_mesh, as_extracted = _improved(quad_mesh)
+        improved = time.perf_counter()
+        problems = _problems(mesh, quad_mesh)
+        if not problems:
+            break
+        failures.append(f"{method.__doc__.split(':')[0]}: at quad size {size:.3g} the quads "
+                        f"are not a valid mesh ({problems[0]})")
+    else:
+        raise ValueError("; ".join(failures) + "; take a smaller quad size")
+    area = float(seamless_map.area.sum())
+    found = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+    found.update(
+        valid=True, problems=[], quad_size=size,
+        area_error=abs(found["area"] - area) / area,
+        misfit_seamless=param_measures.quality(seamless_map)["misfit"],
+        **record, fallback_reason=failures[0] if failures else None,
+        cancelled_singularities=mesh.cancelled,
+        extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj", "sj_at_least_0_8")},
+        seconds={"integrate": integrated - start, "quantise": quantised - begun,
+                 "improve": improved - quantised})
+    return quad_mesh, found
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
+def _by_layout(mesh, seamless_map):
+    """layout: the quads of the T-mesh's patches, with integer arc lengths."""
+    from ufl_frames.quads import patches
+
+    quad_mesh, lay, n = patches.quads_of_map(seamless_map)
+    return quad_mesh, dict(
+        quantisation="layout", patches=len(lay.patches), arcs=len(lay.arcs),
+        collapsed_arcs=int(np.count_nonzero(np.asarray(n) == 0)),
+        untangled_triangles=int(lay.untangled), unlocated_points=int(lay.unlocated),
+        misfit_quantised=None, rounded=None, max_rounding=None, repaired=None)
+
+
+def _by_rounding(mesh, seamless_map):
+    """greedy rounding: the integer-grid map's iso-lines."""
+    from ufl_frames.param import measures as param_measures
+    from ufl_frames.param import quantise
+    from ufl_frames.quads import extract
+
+    grid_map = quantise.quantise(mesh, seamless_map.scale)
+    return extract.extract_quads(grid_map), dict(
+        quantisation="greedy", patches=None, arcs=None, collapsed_arcs=None,
+        untangled_triangles=None, unlocated_points=None,
+        misfit_quantised=param_measures.quality(grid_map.param)["misfit"],
+        rounded=grid_map.rounded, max_rounding=grid_map.max_shift, repaired=grid_map.repaired)
+
+
+def _improved(quad_mesh):
+    """(the quad mesh with its worst quads improved, its measures before)."""
+    from ufl_frames.quads import measures
+    from ufl_frames.quads.improve import improve_worst_quads
+
+    before = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+    return replace(quad_mesh, points=improve_worst_quads(quad_mesh.points,
+                                                         quad_mesh.quads)), before
+
+
+def _problems(mesh, quad_mesh) -> list[str]:
+    """What makes ``quad_mesh`` no mesh of the shape of the cut mesh ``mesh``: the
+    independent checks (:func:`~ufl_frames.quads.measures.check_quad_mesh`), the Euler
+    characteristic, and a boundary longer than the triangles' (quads missing there)."""
+    from ufl_frames.quads import measures
+
     problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads,
                                         slits=_has_slits(mesh))
     euler, expected = measures.euler_characteristic(quad_mesh.quads), _euler(mesh)
@@ -208,19 +283,4 @@ def _quad_mesh(mesh, size: float):
     if length > bound * (1 + 1e-9):
         problems.append(f"the quads' boundary is {length / bound - 1:.2%} longer than the "
                         "shape's (quads are missing)")
-    if problems:  # the map is valid, but its grid too coarse for the shape
-        raise ValueError(f"at quad size {size:.3g} the quads are not a valid mesh "
-                         f"({problems[0]}); take a smaller quad size")
-    record = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
-    record.update(
-        valid=not problems, problems=problems[:5], quad_size=size,
-        area_error=abs(record["area"] - area) / area,
-        misfit_seamless=param_measures.quality(grid_map.seamless)["misfit"],
-        misfit_quantised=param_measures.quality(grid_map.param)["misfit"],
-        rounded=grid_map.rounded, max_rounding=grid_map.max_shift,
-        repaired=grid_map.repaired, cancelled_singularities=grid_map.mesh.cancelled,
-        extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj",
-                                                      "sj_at_least_0_8")},
-        seconds={"quantise": quantised - start, "extract": extracted - quantised,
-                 "improve": improved - extracted})
-    return quad_mesh, record
+    return problems
