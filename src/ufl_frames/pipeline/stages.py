@@ -129,9 +129,12 @@ def parametrise(source, quad_size: float | None = None) -> Parametrised:
 
 def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
     """The quad mesh of a field (:mod:`ufl_frames.quads`), on rank 0 (collective): the
-    seamless map quantised to an integer-grid map (:func:`~ufl_frames.param.quantise.quantise`),
-    its integer iso-lines traced into quads (:func:`~ufl_frames.quads.extract.extract_quads`),
-    the worst quads improved (:func:`~ufl_frames.quads.improve.improve_worst_quads`).
+    seamless map's T-mesh with integer arc lengths and its patches' grids
+    (:func:`~ufl_frames.quads.patches.quads_of_map`), or where that fails or its worst quad
+    is under :data:`MIN_SJ`, the map quantised by greedy rounding
+    (:func:`~ufl_frames.param.quantise.quantise`) and its integer iso-lines traced into
+    quads (:func:`~ufl_frames.quads.extract.extract_quads`); the worst quads improved
+    (:func:`~ufl_frames.quads.improve.improve_worst_quads`).
 
     Args:
         source: a :class:`~ufl_frames.pipeline.field.FrameField`, or the
@@ -141,7 +144,8 @@ def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
 
     Returns:
         The mesh and its measures (:func:`~ufl_frames.quads.measures.quad_quality`, with
-        ``valid``, ``problems``, ``quad_size``, the rounding's and the seconds per stage).
+        ``valid``, ``problems``, ``quad_size``, ``quantisation`` (``layout`` or
+        ``greedy``) with its counts, ``fallback_reason``, and the seconds per stage).
 
     Raises:
         ValueError: on every rank, where no valid integer-grid map exists at that size,
@@ -185,7 +189,8 @@ def _quad_mesh(mesh, size: float):
     valid by construction where the map's traces do not fold), else by greedy rounding and
     iso-line extraction (:func:`~ufl_frames.param.quantise.quantise`,
     :func:`~ufl_frames.quads.extract.extract_quads`); the first whose quads pass the
-    checks (:func:`_problems`) is kept."""
+    checks (:func:`_problems`) with no scaled Jacobian under :data:`MIN_SJ` is kept, else
+    the valid one with the better worst quad."""
     from ufl_frames.param import measures as param_measures
     from ufl_frames.param import seamless
     from ufl_frames.quads import measures
@@ -194,24 +199,32 @@ def _quad_mesh(mesh, size: float):
     scale = seamless.scale_for_quad_size(mesh, size)
     seamless_map = seamless.integrate(mesh, scale)
     integrated = time.perf_counter()
-    failures = []
+    failures, kept = [], None
     for method in (_by_layout, _by_rounding):
+        name = method.__doc__.split(":")[0]
         begun = time.perf_counter()
         try:
             quad_mesh, record = method(mesh, seamless_map)
         except ValueError as e:  # LayoutError, QuantisationError, ExtractionError
-            failures.append(f"{method.__doc__.split(':')[0]}: {_one_line(e)}")
+            failures.append(f"{name}: {_one_line(e)}")
             continue
-        quantised = time.perf_counter()
         quad_mesh, as_extracted = _improved(quad_mesh)
-        improved = time.perf_counter()
         problems = _problems(mesh, quad_mesh)
-        if not problems:
+        if problems:
+            failures.append(f"{name}: at quad size {size:.3g} the quads are not a valid mesh "
+                            f"({problems[0]})")
+            continue
+        worst = float(measures.scaled_jacobians(quad_mesh.points, quad_mesh.quads).min())
+        candidate = (worst, quad_mesh, record, as_extracted, time.perf_counter() - begun)
+        if kept is None or worst > kept[0]:
+            kept = candidate
+        if worst >= MIN_SJ:
             break
-        failures.append(f"{method.__doc__.split(':')[0]}: at quad size {size:.3g} the quads "
-                        f"are not a valid mesh ({problems[0]})")
-    else:
+        failures.append(f"{name}: its worst quad has a scaled Jacobian of {worst:.2g}, under "
+                        f"{MIN_SJ}")
+    if kept is None:
         raise ValueError("; ".join(failures) + "; take a smaller quad size")
+    _, quad_mesh, record, as_extracted, quantised = kept
     area = float(seamless_map.area.sum())
     found = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
     found.update(
@@ -221,9 +234,14 @@ def _quad_mesh(mesh, size: float):
         **record, fallback_reason=failures[0] if failures else None,
         cancelled_singularities=mesh.cancelled,
         extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj", "sj_at_least_0_8")},
-        seconds={"integrate": integrated - start, "quantise": quantised - begun,
-                 "improve": improved - quantised})
+        seconds={"integrate": integrated - start, "quantise": quantised,
+                 "all": time.perf_counter() - start})
     return quad_mesh, found
+
+
+#: The worst scaled Jacobian a quad mesh should have: a method whose quads are worse hands
+#: over to the next (the T-mesh's to greedy rounding); the best is kept if none reaches it.
+MIN_SJ = 0.3
 
 
 def _one_line(e: BaseException) -> str:

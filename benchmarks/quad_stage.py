@@ -1,0 +1,181 @@
+"""The quad stage's time at three sizes: the T-mesh layout against greedy rounding.
+
+    python benchmarks/quad_stage.py [--shape benchmarks/shapes/polyline_airfoil.geo]
+                                    [--quads 1e3 1e4 1e5] [--triangles-per-quad 4]
+                                    [--greedy-timeout 600] [--json FILE]
+
+For each target number of quads N the shape is meshed with about ``--triangles-per-quad``
+× N triangles, the MBO field is computed and made conformal (``--conformal``, as
+``ufl-frames mesh`` would), and the field is gathered and cut once
+(:class:`ufl_frames.pipeline.stages.RootField`). Then, on that cut mesh, each stage is
+timed on its own:
+
+* ``cut``: :func:`ufl_frames.param.cut.cut_mesh` (the cut graph, the combing);
+* ``integrate``: the seamless map (:func:`ufl_frames.param.seamless.integrate`);
+* ``layout``: the motorcycle graph and its patches (:func:`ufl_frames.quads.layout.layout`,
+  with :func:`~ufl_frames.quads.layout.untangle` first where the map folds);
+* ``lengths``: the integer program (:func:`ufl_frames.quads.patches.integer_lengths`);
+* ``quads``: the patches' grids mapped back (:func:`ufl_frames.quads.patches.patch_quads`);
+* ``improve`` and ``check``: :func:`ufl_frames.quads.improve.improve_worst_quads` and the
+  checks of the stage;
+* ``greedy``: the older path, greedy rounding and iso-line extraction
+  (:func:`ufl_frames.param.quantise.quantise` + :func:`ufl_frames.quads.extract.extract_quads`),
+  in a child process stopped after ``--greedy-timeout`` seconds.
+
+Serial. Prints one Markdown table (seconds per stage, quads, irregular vertices, min SJ,
+patches, arcs, collapsed arcs, peak memory) and writes ``--json`` if given.
+"""
+
+import argparse
+import json
+import multiprocessing
+import resource
+import sys
+import time
+from pathlib import Path
+
+from _common import ROOT, table_rule
+
+DEFAULT_SHAPE = ROOT / "benchmarks" / "shapes" / "polyline_airfoil.geo"
+
+
+def _greedy_child(mesh, scale, queue) -> None:
+    from ufl_frames.param import quantise
+    from ufl_frames.quads import extract
+
+    start = time.perf_counter()
+    try:
+        quads = extract.extract_quads(quantise.quantise(mesh, scale))
+        queue.put((time.perf_counter() - start, quads.num_quads, None))
+    except Exception as e:  # reported in the table
+        queue.put((time.perf_counter() - start, None, " ".join(str(e).split())[:80]))
+
+
+def greedy(mesh, scale, timeout: float) -> tuple:
+    """(seconds, quads or None, error or None) of the greedy path, in a child process."""
+    queue = multiprocessing.get_context("fork").Queue()
+    child = multiprocessing.get_context("fork").Process(target=_greedy_child,
+                                                        args=(mesh, scale, queue))
+    child.start()
+    child.join(timeout)
+    if child.is_alive():
+        child.kill()
+        child.join()
+        return timeout, None, f"stopped after {timeout:.0f} s"
+    return queue.get() if not queue.empty() else (None, None, "the child died")
+
+
+def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -> dict:
+    """One row: every stage of the quad mesh of ``shape`` at about ``quads`` quads."""
+    import numpy as np
+    from mpi4py import MPI
+
+    from ufl_frames.fem.scales import mean_cell_edge
+    from ufl_frames.mesh import load
+    from ufl_frames.param import cut, seamless
+    from ufl_frames.pipeline import FrameField
+    from ufl_frames.pipeline.stages import RootField, _improved, _problems
+    from ufl_frames.quads import layout, measures, patches
+
+    comm = MPI.COMM_SELF
+    probe = load(comm, shape)  # the shape's own default mesh: its area and mean edge
+    area = probe.mesh.comm.allreduce(
+        float(np.sum(np.abs(_areas(probe.mesh)))), op=MPI.SUM)
+    quad_size = float(np.sqrt(area / quads))
+    h = quad_size / np.sqrt(per_quad / 2)  # two triangles of edge h per h² of area
+    start = time.perf_counter()
+    domain = load(comm, shape, mesh_size=h)
+    field = FrameField.initial(domain, isotropic=True).conformal()
+    row = {"target quads": int(quads), "triangles": domain.num_cells,
+           "field s": time.perf_counter() - start,
+           "mean edge": mean_cell_edge(domain.mesh)}
+    root = RootField(field)
+    t = time.perf_counter()
+    mesh = cut.cut_mesh(*root._arrays)
+    row["cut s"] = time.perf_counter() - t
+    scale = seamless.scale_for_quad_size(mesh, quad_size)
+    t = time.perf_counter()
+    param = seamless.integrate(mesh, scale)
+    row["integrate s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    folds = int(np.count_nonzero(seamless.folded(param)))
+    if folds:
+        param, _ = layout.untangle(param)
+    lay = layout.layout(param)
+    row["layout s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    n = patches.integer_lengths(lay)
+    row["lengths s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    quad_mesh = patches.patch_quads(lay, n)
+    row["quads s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    quad_mesh, _ = _improved(quad_mesh)
+    row["improve s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    problems = _problems(mesh, quad_mesh)
+    row["check s"] = time.perf_counter() - t
+    quality = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
+    row.update({"quads": quality["quads"], "irregular": quality["irregular_vertices"],
+                "min SJ": quality["min_sj"], "valid": not problems,
+                "patches": len(lay.patches), "arcs": len(lay.arcs),
+                "collapsed": int(np.count_nonzero(np.asarray(n) == 0)),
+                "folded before": folds})
+    row["quad stage s"] = sum(row[k] for k in ("integrate s", "layout s", "lengths s",
+                                               "quads s", "improve s", "check s"))
+    row["peak MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    seconds, greedy_quads, error = greedy(mesh, scale, greedy_timeout)
+    row["greedy s"] = seconds
+    row["greedy"] = error or f"{greedy_quads} quads"
+    return row
+
+
+def _areas(mesh):
+
+    x = mesh.geometry.x[:, :2]
+    c = mesh.geometry.dofmap
+    a, b, d = x[c[:, 0]], x[c[:, 1]], x[c[:, 2]]
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1])
+                  - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0]))
+
+
+COLUMNS = ("target quads", "triangles", "quads", "irregular", "min SJ", "valid", "patches",
+           "arcs", "collapsed", "folded before", "cut s", "integrate s", "layout s",
+           "lengths s", "quads s", "improve s", "check s", "quad stage s", "greedy s",
+           "greedy", "field s", "peak MB")
+
+
+def table(rows: list[dict]) -> str:
+    def cell(value):
+        if isinstance(value, float):
+            return f"{value:.3g}" if value < 100 else f"{value:.0f}"
+        return str(value)
+
+    header = "| " + " | ".join(COLUMNS) + " |"
+    lines = [header, table_rule(header)]
+    lines += ["| " + " | ".join(cell(r.get(k, "")) for k in COLUMNS) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--shape", type=Path, default=DEFAULT_SHAPE)
+    parser.add_argument("--quads", type=float, nargs="+", default=[1e3, 1e4, 1e5])
+    parser.add_argument("--triangles-per-quad", type=float, default=4.0)
+    parser.add_argument("--greedy-timeout", type=float, default=600.0)
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    from ufl_frames.bootstrap import init_petsc
+
+    init_petsc(sys.argv[:1])
+    rows = []
+    for n in args.quads:
+        print(f"{args.shape.name}: {n:.0f} quads ...", flush=True)
+        rows.append(measure(args.shape, n, args.triangles_per_quad, args.greedy_timeout))
+    print(table(rows))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
