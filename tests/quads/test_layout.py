@@ -1,5 +1,5 @@
 """The T-mesh of a seamless map, its patches, integer arc lengths and quads
-(``ufl_frames.quads.layout``), pure NumPy/SciPy.
+(``ufl_frames.quads.charts``, ``.motorcycles``, ``.layout``), pure NumPy/SciPy.
 
 Truth: a constant frame integrates to an affine map on any mesh (exactly), so on a
 rectangle there is no trace, one patch, and the quads are the exact round(2 s) × round(s)
@@ -23,7 +23,7 @@ from test_quads import constant_field, pair_field, wobble
 
 from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, seamless
-from ufl_frames.quads import layout, patches
+from ufl_frames.quads import charts, layout, motorcycles, patches
 from ufl_frames.quads.measures import check_quad_mesh, quad_quality
 
 
@@ -169,8 +169,8 @@ def test_fixed_point_charts_are_exact():
     x, cells = grid(16, 16, -1, 1, -1, 1)
     mesh = cut.cut_mesh(x, cells, quarter_field(x))
     param = seamless.integrate(mesh, 3.0)
-    P = layout.fixed_point(param)
-    assert np.abs(P / layout.UNIT - (param.uv - param.uv[0])).max() < 2.0**-18
+    P = charts.fixed_point(param)
+    assert np.abs(P / charts.UNIT - (param.uv - param.uv[0])).max() < 2.0**-18
     for e in mesh.cut:
         f, g = mesh.faces[e]
         rot = seamless.quarter_turn(mesh.jump[e]).astype(np.int64)
@@ -193,7 +193,7 @@ def test_a_folded_map_is_reported_or_untangled():
     folded = seamless.parametrisation(mesh, uv, 3.3)
     count = int(np.count_nonzero(seamless.folded(folded)))
     assert count > 0
-    with pytest.raises(layout.LayoutError, match="fold"):
+    with pytest.raises(charts.LayoutError, match="fold"):
         layout.layout(folded)
     quads, lay, _ = patches.quads_of_map(folded)
     assert lay.untangled == count and lay.folded.size == 0
@@ -214,8 +214,8 @@ def test_a_trace_that_does_not_end_is_reported():
     x, cells = annulus(8, 48)
     mesh = cut.cut_mesh(x, cells, annulus_field(x))
     param = seamless.integrate(mesh, 3.0)
-    tracer = layout.Motorcycles(param, max_steps=3)
-    with pytest.raises(layout.LayoutError, match="does not end"):
+    tracer = motorcycles.Motorcycles(param, max_steps=3)
+    with pytest.raises(charts.LayoutError, match="does not end"):
         layout.layout(param, tracer)
 
 

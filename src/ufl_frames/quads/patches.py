@@ -33,16 +33,10 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from ufl_frames.param.seamless import Parametrisation, folded
+from ufl_frames.quads.charts import UNIT, LayoutError
 from ufl_frames.quads.extract import QuadMesh
-from ufl_frames.quads.layout import (
-    UNIT,
-    Layout,
-    LayoutError,
-    _piece_length,
-    _rot,
-    layout,
-    untangle,
-)
+from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
+from ufl_frames.quads.motorcycles import rot
 
 __all__ = ["COLLAPSE_BELOW", "integer_lengths", "patch_quads", "quads_of_map"]
 
@@ -99,7 +93,7 @@ def integer_lengths(lay: Layout, weights=None,
         collapse_below: arcs shorter than this may get 0 (0: every arc at least 1).
 
     Returns:
-        n (A,) int64. Raises :class:`~ufl_frames.quads.layout.LayoutError` where there is
+        n (A,) int64. Raises :class:`~ufl_frames.quads.charts.LayoutError` where there is
         no solution.
     """
     L = lay.lengths()
@@ -250,7 +244,7 @@ def _arc_points(mc, arc, n):
     Returns:
         A list of n − 1 plane points.
     """
-    lengths = [float(_piece_length(p)) for p in arc.pieces]
+    lengths = [float(piece_length(p)) for p in arc.pieces]
     total = sum(lengths)
     out, j, at = [], 0, 0.0
     for k in range(1, n):
@@ -292,7 +286,7 @@ def _walk(mc, state, q, max_steps):
     entry = -1
     fpts, nb, xs = mc.float_pts, mc.nb, mc.float_x
     for _ in range(max_steps):
-        A = [_rot(k, c) for c in fpts[f]]
+        A = [rot(k, c) for c in fpts[f]]
         A = [(a[0] + t[0], a[1] + t[1]) for a in A]
         lq = _bary(A, q)
         if min(lq) >= -1e-12:
@@ -319,7 +313,7 @@ def _walk(mc, state, q, max_steps):
                                        for c in range(2))
         j, e = mc.turn[f][i_best], mc.shift[f][i_best]
         k2 = (k - j) % 4
-        e = _rot(k2, e)
+        e = rot(k2, e)
         t = (t[0] - e[0], t[1] - e[1])
         entry = nb[g].index(f) if nb[g].count(f) == 1 else -1
         f, k = g, k2
@@ -329,7 +323,7 @@ def _walk(mc, state, q, max_steps):
 def _walk_point(mc, state):
     """The plane point of a walk's state (its point clamped into its triangle)."""
     f, k, t, p = state
-    A = [_rot(k, c) for c in mc.float_pts[f]]
+    A = [rot(k, c) for c in mc.float_pts[f]]
     lam = [max(v, 0.0) for v in _bary([(a[0] + t[0], a[1] + t[1]) for a in A], p)]
     x = mc.float_x[f]
     return tuple(sum(lam[i] * x[i][c] for i in range(3)) / sum(lam) for c in range(2))
