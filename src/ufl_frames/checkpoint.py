@@ -204,7 +204,18 @@ _ADDED_LATER = {"pin_radius": 0.0}
 
 def check_run(meta: dict, run: dict, out) -> None:
     """Raise :class:`CheckpointError` if the checkpoint ``meta`` is of a run with other
-    arguments than ``run`` (the first that differs is named)."""
+    arguments than ``run`` (the first that differs is named).
+
+    Args:
+        meta: the checkpoint (:func:`read`); its ``"run"`` record is compared (arguments
+            older checkpoints do not record take the value those runs had).
+        run: the record of the run that would resume
+            (:func:`ufl_frames.app.run.run_record`).
+        out: the output folder holding the checkpoint (named in the message).
+
+    Raises:
+        CheckpointError: a compared argument differs.
+    """
     saved = {**_ADDED_LATER, **meta.get("run", {})}
     for key, label in _COMPARED.items():
         if saved.get(key) != run.get(key):
@@ -219,7 +230,20 @@ def check_run(meta: dict, run: dict, out) -> None:
 
 def restore(meta: dict, V, comm) -> SolverState:
     """The :class:`~ufl_frames.solvers.SolverState` of a checkpoint (:func:`read`) on this
-    rank's rows of the P1 space ``V`` (collective)."""
+    rank's rows of the P1 space ``V`` (collective).
+
+    Args:
+        meta: the checkpoint (:func:`read`); its arrays, on rank 0 only, are broadcast.
+        V: the P1 frame space of the mesh the run resumes on.
+        comm: the communicator of ``V``.
+
+    Returns:
+        The solver state with ``rows`` this rank's owned rows of q (and the flags its
+        local rows, ghosts included), in ``V``'s order.
+
+    Raises:
+        CheckpointError: the checkpoint's field does not fit the mesh of ``V``.
+    """
     arrays = comm.bcast(meta["arrays"] if comm.rank == 0 else None, root=0)
     order = input_node_order(V)
     n = V.dofmap.index_map.size_local

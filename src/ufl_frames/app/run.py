@@ -99,7 +99,13 @@ class Printer:
 
 
 def warn(comm, quiet: bool, text: str) -> None:
-    """``ufl-frames: warning: <text>`` on stderr (rank 0, unless ``quiet``)."""
+    """``ufl-frames: warning: <text>`` on stderr (rank 0, unless ``quiet``).
+
+    Args:
+        comm: the run's communicator (only its rank 0 writes).
+        quiet: write nothing.
+        text: the warning, without the ``ufl-frames: warning:`` prefix.
+    """
     if not quiet and comm.rank == 0:
         print(f"{PROG}: warning: {text}", file=sys.stderr)
 
@@ -150,6 +156,18 @@ def check_output_folder(out, force: bool, comm, resuming: bool = False) -> None:
 
     Checked on rank 0 and broadcast, so that all ranks agree even when another rank
     has already started writing.
+
+    Args:
+        out: the output folder (a path; it need not exist yet).
+        force: a folder that exists and is not empty may be overwritten.
+        comm: the run's communicator.
+        resuming: the run resumes from ``out``: its ``checkpoint`` folder is the run's own
+            and is allowed there.
+
+    Raises:
+        OutputFolderError: ``out`` is a broken link, a file, a file system root, not empty
+            (without ``force``), holds an interrupted run's checkpoint (neither ``force``
+            nor ``resuming``), or cannot be created or written (nor its parent).
     """
     problem = _output_folder_problem(Path(out), force, resuming) if comm.rank == 0 else None
     problem = comm.bcast(problem, root=0)
@@ -208,7 +226,20 @@ _OUTPUT_ONLY_OPTION = re.compile(r"monitor|view|^log|^options_left$|^help$|^info
 
 def run_record(config: RunConfig, comm, petsc_options: dict) -> dict:
     """The settings that decide a run's result, for its checkpoint (collective): the
-    geometry by name or by the SHA-256 of its file, the PETSc options but for monitors."""
+    geometry by name or by the SHA-256 of its file, the PETSc options but for monitors.
+
+    Args:
+        config: the run's settings.
+        comm: the run's communicator (rank 0 reads the geometry file and broadcasts).
+        petsc_options: the PETSc options of the run (name to value); those that only
+            change what is printed (monitors, views, logs) are left out.
+
+    Returns:
+        A JSON-ready dict: ``geometry`` and ``geometry_id`` (the built-in name,
+        ``"sha256:<hex>"`` of the file, or None if it cannot be read), the settings that
+        decide the result (sizes as floats) and ``petsc_options`` as sorted
+        ``[name, value]`` pairs; compared by :func:`ufl_frames.checkpoint.check_run`.
+    """
     from ufl_frames import mesh as geometry_module
 
     geometry, identity = config.geometry, None
@@ -370,6 +401,13 @@ class _Solve:
     # --- monitors and checkpoints ---
 
     def mbo_monitor(self, level, tau, change):
+        """Say one MBO step (``sqrt(tau)``, max change) of mesh ``level``; take interrupts.
+
+        Args:
+            level: the index of the mesh in the hierarchy, coarsest 0.
+            tau: the diffusion time of the step.
+            change: the largest change of the field in the step.
+        """
         self.say(f"  level {level}: sqrt(tau) {math.sqrt(tau):.3g}, max change {change:.2e}")
         interrupts.raise_if_interrupted(self.comm)
 
@@ -594,7 +632,17 @@ class _Solve:
 
     def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:
         """The record for ``summary.json`` (collective): the field's kind, the run's
-        settings, the findings, the time and the files."""
+        settings, the findings, the time and the files.
+
+        Args:
+            start: the run's start, a :func:`time.perf_counter` value (the total time is
+                the slowest rank's).
+            petsc_options: the PETSc options of the run (name to value), recorded as given.
+            files: the names of the files written into the output folder.
+
+        Returns:
+            The JSON-ready dict written as ``summary.json``.
+        """
         from mpi4py import MPI
 
         from ufl_frames.pipeline.report import findings_record, frames_record

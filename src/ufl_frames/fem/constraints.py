@@ -76,7 +76,16 @@ class FrameConstraints:
 
     def with_fixed(self, rows: np.ndarray, directions: np.ndarray,
                    kind: Fixed) -> "FrameConstraints":
-        """These constraints with ``rows`` (not fixed yet) fixed to ``directions``."""
+        """These constraints with ``rows`` (not fixed yet) fixed to ``directions``.
+
+        Args:
+            rows: local rows (nr,) that are not fixed yet.
+            directions: the unit direction one branch keeps at each row, (nr, dim).
+            kind: why they are fixed, one :class:`Fixed` for all ``rows``.
+
+        Returns:
+            A new :class:`FrameConstraints` (this one is unchanged), ``rows`` appended.
+        """
         return replace(
             self,
             fixed=np.concatenate([self.fixed, rows]),

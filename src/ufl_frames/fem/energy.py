@@ -52,7 +52,17 @@ def check_frame_mesh(mesh, algebra=ALGEBRA) -> None:
 def check_frame_function(q, what: str = "q", algebra=ALGEBRA) -> None:
     """Raise ValueError unless ``q`` is a continuous P1 field of the frame ``algebra``'s
     coefficients (5 in 2D) on a mesh that :func:`check_frame_mesh` accepts (what every
-    form here assumes)."""
+    form here assumes).
+
+    Args:
+        q: the field to check.
+        what: its name in the message.
+        algebra: the frame algebra (default: 2D frames).
+
+    Raises:
+        ValueError: ``q`` is not a DOLFINx Function, its mesh is not one of straight
+            simplices, or its space is not continuous P1 with ``algebra.count`` components.
+    """
     if not isinstance(q, fem.Function):
         raise ValueError(f"{what} must be a dolfinx Function, got {type(q).__name__}")
     V = q.function_space
@@ -79,6 +89,15 @@ def interpolate_frames(V, f, name: str = "q") -> fem.Function:
 
     ``x`` has shape (3, M) (points of the vertices); the frame at each vertex is
     encoded exactly (note eqs. 1–2), so q lies on the Odeco variety at every vertex.
+
+    Args:
+        V: the P1 frame space (:func:`frame_space`).
+        f: called with the dof coordinates ``x`` (3, M); returns the lengths ``l1``,
+            ``l2`` and the ``angle`` of the first branch, each (M,) or broadcastable to it.
+        name: the Function's name.
+
+    Returns:
+        A new Function on ``V``.
     """
     q = fem.Function(V, name=name)
     x = V.tabulate_dof_coordinates().T

@@ -481,7 +481,17 @@ def damped_hessian_form(q: fem.Function, damping: fem.Constant,
                         inverse_area: fem.Constant, algebra=ALGEBRA) -> fem.Form:
     """The same with the full Hessian of H, ∫ J[δq]·J[w] + r·D²r[δq, w] dx (r = [u, v],
     D²r_i[δq, w] = C_ijkl (δq_l ∂_k w_j + w_l ∂_k δq_j)): the matrix of the UFL second
-    derivative of :func:`energy.integrability_energy_form` plus the damping."""
+    derivative of :func:`energy.integrability_energy_form` plus the damping.
+
+    Args:
+        q: The frame field.
+        damping: λ, read at every assembly.
+        inverse_area: 1/A, read at every assembly.
+        algebra: The frame algebra of ``q``.
+
+    Returns:
+        The compiled form (collective: compiles once).
+    """
     return _damped_form(q, damping, inverse_area, True, algebra)
 
 
@@ -534,8 +544,24 @@ def model_action_form(q: fem.Function, direction: fem.Function, damping: fem.Con
                       algebra=ALGEBRA) -> fem.Form:
     """The vector A d of the matrix A of :func:`damped_gauss_newton_form` (``exact``:
     :func:`damped_hessian_form`) and a P1 field ``direction`` d of ``q``'s space, without
-    A (a linear form, the element matrix applied in the kernel). ``damping``,
-    ``inverse_area`` and ``algebra`` as there."""
+    A (a linear form, the element matrix applied in the kernel).
+
+    Args:
+        q: The frame field.
+        direction: d, a P1 function of as many components as ``q``, numbering the
+            vertices as ``q``'s space does.
+        damping: λ, read at every assembly.
+        inverse_area: 1/A, read at every assembly.
+        exact: The full Hessian instead of Gauss–Newton.
+        algebra: The frame algebra of ``q``.
+
+    Returns:
+        The compiled linear form on ``q``'s space (collective: compiles once).
+
+    Raises:
+        ValueError: ``direction`` numbers the vertices otherwise or has another number
+            of components.
+    """
     check_frame_function(q, algebra=algebra)
     _check_same_vertices(q.function_space, direction.function_space)
     if direction.function_space.dofmap.index_map_bs != q.function_space.dofmap.index_map_bs:

@@ -137,6 +137,17 @@ class FrameManifold:
         ``held``: rows kept on the bound whatever the gradient; with ``only_held`` the held
         rows alone are active).
         Same in q and in x.
+
+        Args:
+            rows: local rows (N, count), on 𝓜.
+            gradient: a gradient (N, count) that decides which frames on the aspect bound
+                are held there (those it pushes outwards); None: the aspect bound is
+                not active.
+            held: (N,) bool, rows kept on the bound whatever ``gradient``; None: none.
+            only_held: only the ``held`` rows are on the bound, whatever ``gradient``.
+
+        Returns:
+            The basis (N, count, columns), the algebra's ``tangent_columns``.
         """
         c, algebra = self.constraints, self.algebra
         basis = algebra.tangent_basis(rows, max_aspect=c.max_aspect, gradient=gradient,
@@ -154,7 +165,19 @@ class FrameManifold:
         """Step 2 of note §3: the pointwise tangent part of ``dq`` at ``rows``; the active
         aspect bounds are decided by ``gradient`` (default: ``dq`` itself, a gradient)
         and ``held`` (``only_held``: see :meth:`tangent_basis`), unless ``basis``
-        (:meth:`tangent_basis` at ``rows``) is given."""
+        (:meth:`tangent_basis` at ``rows``) is given.
+
+        Args:
+            rows: local rows (N, count), on 𝓜.
+            dq: the vectors to project (N, count), in q or in x.
+            gradient: decides the active aspect bounds (N, count); None: ``dq``.
+            held: (N,) bool, rows kept on the bound (:meth:`tangent_basis`).
+            basis: the tangent basis (N, count, columns) to project on; None: made here.
+            only_held: only the ``held`` rows are on the bound.
+
+        Returns:
+            The tangent part (N, count), in the units of ``dq``.
+        """
         if basis is None:
             basis = self.tangent_basis(rows, dq if gradient is None else gradient, held,
                                        only_held)
@@ -166,7 +189,19 @@ class FrameManifold:
         """grad f on 𝓜 at ``rows`` from the Euclidean gradient ``gradient_x`` = ∂f/∂x (local
         rows): pointwise tangent part, then the component along x removed (the sphere's
         tangent). Owned rows, in x. ``held``, ``only_held``: the aspect bound's active set
-        as in :meth:`tangent_basis` (``only_held`` with no row held: no bound at all)."""
+        as in :meth:`tangent_basis` (``only_held`` with no row held: no bound at all).
+
+        Args:
+            rows: local rows (N, count) in q, on 𝓜.
+            gradient_x: ∂f/∂x at the local rows (N, count); it also decides the active
+                aspect bounds.
+            held: (N,) bool, rows kept on the bound; None: none.
+            only_held: only the ``held`` rows are on the bound.
+
+        Returns:
+            The Riemannian gradient (owned, count) in x (collective: the sphere's part is
+            reduced over ranks).
+        """
         n = self.owned
         tangent = self.projection(rows, gradient_x, held=held, only_held=only_held)[:n]
         x = self.to_x(rows)
@@ -199,6 +234,15 @@ class FrameManifold:
         in q (``gradient_x`` · √m); zero where the orientation is fixed (the chart is
         linear there). ``basis``: :meth:`tangent_basis` at ``rows`` with ``gradient_x``.
         The sphere's part is :meth:`sphere_curvature`.
+
+        Args:
+            rows: local rows (N, count) in q, on 𝓜.
+            basis: :meth:`tangent_basis` at ``rows`` (N, count, columns); its absent
+                anisotropy columns give the aspect bound's active set.
+            gradient_x: the Euclidean gradient ∂f/∂x at the local rows (N, count).
+
+        Returns:
+            The blocks (owned, count, count), in x.
         """
         c, n = self.constraints, self.owned
         gradient_q = gradient_x * self.sqrt_mass[:, None]

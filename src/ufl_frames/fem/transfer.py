@@ -34,9 +34,19 @@ def interpolate_field(q_from: fem.Function, mesh_to, padding: float | None = Non
     """``q_from`` (P1 frame field on one mesh) interpolated at the vertices of ``mesh_to``:
     a new P1 frame field there (collective over both meshes' communicator).
 
-    ``padding`` (default: 4 mean cell edges of the source mesh, enough for a curved
-    boundary's O(h²) bulge) is how far outside the source mesh a target vertex may lie.
-    Raises ValueError if a vertex is farther (the meshes are not of the same domain).
+    Args:
+        q_from: the P1 frame field on the source mesh (checked).
+        mesh_to: the target mesh, of the same domain and on the same communicator.
+        padding: how far outside the source mesh a target vertex may lie (default: 4 mean
+            cell edges of the source mesh, enough for a curved boundary's O(h²) bulge).
+
+    Returns:
+        A new P1 frame field ``q`` on ``mesh_to`` (ghosts updated), not yet on the frame
+        manifold.
+
+    Raises:
+        ValueError: a target vertex lies farther than ``padding`` from the source mesh
+            (the meshes are not of the same domain).
     """
     check_frame_function(q_from, "q_from")
     V_from = q_from.function_space

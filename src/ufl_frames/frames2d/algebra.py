@@ -136,13 +136,32 @@ class FrameAlgebra2D:
 
     def project(self, q, isotropic: bool = False, max_aspect: float | None = None) -> np.ndarray:
         """The closest frames to q (isotropic ones with ``isotropic``; with ``max_aspect``
-        the lengths fitted under the aspect bound): :func:`~ufl_frames.frames2d.odeco.project`."""
+        the lengths fitted under the aspect bound): :func:`~ufl_frames.frames2d.odeco.project`.
+
+        Args:
+            q: coefficients (N, 5), none zero.
+            isotropic: the closest frames with l1 = l2.
+            max_aspect: the aspect bound A (None: no bound).
+
+        Returns:
+            The projected coefficients (N, 5).
+        """
         return odeco.project(q, isotropic=isotropic, max_aspect=max_aspect)
 
     def project_aligned(self, q, directions, isotropic: bool = False,
                         max_aspect: float | None = None) -> np.ndarray:
         """The closest frames to q with one branch along ``directions`` (N, 2), lengths free:
-        :func:`~ufl_frames.frames2d.odeco.project_aligned`."""
+        :func:`~ufl_frames.frames2d.odeco.project_aligned`.
+
+        Args:
+            q: coefficients (N, 5).
+            directions: the direction of one branch at each frame (N, 2), non-zero.
+            isotropic: the lengths fitted with l1 = l2.
+            max_aspect: the aspect bound A (None: no bound).
+
+        Returns:
+            The projected coefficients (N, 5).
+        """
         return odeco.project_aligned(q, directions, isotropic=isotropic, max_aspect=max_aspect)
 
     # --- tangent spaces and curvature ------------------------------------------------------
@@ -150,7 +169,19 @@ class FrameAlgebra2D:
     def tangent_basis(self, q, max_aspect: float | None = None, gradient=None,
                       on_variety: bool = False, held=None, only_held: bool = False) -> np.ndarray:
         """Orthonormal basis (N, 5, 3) of the tangent space at the frames nearest q, the
-        aspect bound an active set: :func:`~ufl_frames.frames2d.odeco.tangent_basis`."""
+        aspect bound an active set: :func:`~ufl_frames.frames2d.odeco.tangent_basis`.
+
+        Args:
+            q: coefficients (N, 5), none zero.
+            max_aspect: the aspect bound A (None: no bound).
+            gradient: (N, 5), decides which frames on the bound are active (None: none).
+            on_variety: q lies on the variety (the frame read off directly).
+            held: (N,) bool, frames kept active while on the bound (None: none).
+            only_held: the ``held`` frames on the bound are the active set.
+
+        Returns:
+            The basis (N, 5, 3): e_s, e_d, rotation; a column absent is zero.
+        """
         return odeco.tangent_basis(q, max_aspect=max_aspect, gradient=gradient,
                                    on_variety=on_variety, held=held, only_held=only_held)
 
@@ -163,13 +194,34 @@ class FrameAlgebra2D:
                           isotropic: bool = False, active_gradient=None,
                           active=None) -> np.ndarray:
         """Σ_k g_k ∂²q_k in the tangent basis, (N, 3, 3):
-        :func:`~ufl_frames.frames2d.odeco.tangent_curvature`."""
+        :func:`~ufl_frames.frames2d.odeco.tangent_curvature`.
+
+        Args:
+            q: coefficients (N, 5) on the variety.
+            gradient: g, the energy's gradient in q (N, 5).
+            max_aspect: the aspect bound A (None: no bound).
+            isotropic: frames with l1 = l2 (no e_d direction).
+            active_gradient: (N, 5), decides the active set (None: ``gradient``).
+            active: (N,) bool, the active set given instead (None: decided).
+
+        Returns:
+            W (N, 3, 3), in the columns of :meth:`tangent_basis`.
+        """
         return odeco.tangent_curvature(q, gradient, max_aspect, isotropic,
                                        active_gradient=active_gradient, active=active)
 
     def pushed_off_bound(self, q, direction, max_aspect: float) -> np.ndarray:
         """Frames on the aspect bound that ``direction`` pushes outwards (N,) bool:
-        :func:`~ufl_frames.frames2d.odeco.pushed_off_bound`."""
+        :func:`~ufl_frames.frames2d.odeco.pushed_off_bound`.
+
+        Args:
+            q: coefficients (N, 5) on the variety.
+            direction: the step (N, 5).
+            max_aspect: the aspect bound A.
+
+        Returns:
+            (N,) bool.
+        """
         return odeco.pushed_off_bound(q, direction, max_aspect)
 
     # --- the aspect bound --------------------------------------------------------------------

@@ -53,6 +53,17 @@ def clamp_aspect(s, d, max_aspect: float):
     For a fixed angle the frames are s e_s + d e_d with |e_s|² = 19/64, |e_d|² = 1/4,
     so the constrained fit projects (s, d) onto the ray d = ±κ s in that metric.
     Frames inside the bound are returned unchanged.
+
+    Args:
+        s: total lengths l1 + l2, (N,) or a scalar.
+        d: length differences l1 − l2, as ``s``.
+        max_aspect: the bound A (finite, ≥ 1).
+
+    Returns:
+        (s, d), arrays shaped as the inputs, with |d| ≤ κ s.
+
+    Raises:
+        ValueError: ``max_aspect`` is not finite or below 1.
     """
     k = kappa(max_aspect)
     s = np.asarray(s, dtype=np.float64)
@@ -75,9 +86,25 @@ def active_bound(s, d, gradient, e_s, e_d, max_aspect: float, held=None,
     ``held`` (N,) marks frames kept on the bound whatever the gradient says, while they
     are on it (the solver's anti-zigzag rule); with ``only_held`` they are the active set
     itself (where on the bound) and the gradient decides nothing (the rule that decides
-    the set with the Newton step, ``GaussNewtonModel._consistent_active_set``). Returns
-    ``(active, sign, κ)``: the mask (N,), the sign of d and the slope, with which the
-    direction along the bound is e_s + sign κ e_d.
+    the set with the Newton step, ``GaussNewtonModel._consistent_active_set``).
+
+    Args:
+        s: total lengths l1 + l2 (N,).
+        d: length differences l1 − l2 (N,).
+        gradient: g (N, 5), the gradient whose descent −g decides.
+        e_s: the unnormalised direction of s at each frame (N, 5).
+        e_d: the unnormalised direction of d at each frame (N, 5).
+        max_aspect: the bound A (finite, ≥ 1).
+        held: (N,) bool, frames kept on the bound while on it (None: none).
+        only_held: the ``held`` frames on the bound are the active set.
+
+    Returns:
+        ``(active, sign, κ)``: the mask (N,), the sign of d (N,) and the slope, with which
+        the direction along the bound is e_s + sign κ e_d.
+
+    Raises:
+        ValueError: ``only_held`` without ``held``, or ``max_aspect`` not finite or
+            below 1.
     """
     k = kappa(max_aspect)
     sign = np.where(d < 0, -1.0, 1.0)

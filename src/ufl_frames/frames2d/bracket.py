@@ -57,6 +57,15 @@ def lie_bracket_direct(lengths, angles, grad_lengths, grad_angles) -> np.ndarray
     u = l1 (cos t, sin t), v = l2 (−sin t, cos t); ``grad_lengths`` (N, 2, 2) holds
     ∇l1, ∇l2 and ``grad_angles`` (N, 2) holds ∇t. From [u, v] = ∇_u v − ∇_v u:
     [u,v] = l1 (û·∇l2) v̂ − l1 l2 (û·∇t) û − l2 (v̂·∇l1) û − l1 l2 (v̂·∇t) v̂.
+
+    Args:
+        lengths: l1, l2 (N, 2).
+        angles: t, the angle of u (N,).
+        grad_lengths: ∇l1, ∇l2 (N, 2, 2), ``grad_lengths[:, i]`` the gradient of l_(i+1).
+        grad_angles: ∇t (N, 2).
+
+    Returns:
+        [u, v] (N, 2).
     """
     l1, l2 = np.asarray(lengths, dtype=np.float64).T
     t = np.asarray(angles, dtype=np.float64)

@@ -230,6 +230,23 @@ def tangent_basis(
     active set (on the bound), whatever the gradient. ``on_variety`` promises that q lies
     on the variety: the frame is then read off q directly (about 3x faster) instead of by
     the closest-point search.
+
+    Args:
+        q: coefficients (N, 5), none zero.
+        max_aspect: the aspect bound A (None: no bound, every frame keeps e_d).
+        gradient: (N, 5), decides which frames on the bound are active (None: zero, no
+            frame is pushed outwards).
+        on_variety: q lies on the variety (read off directly).
+        held: (N,) bool, frames kept active while on the bound (None: none).
+        only_held: the ``held`` frames on the bound are the active set; ``gradient``
+            decides nothing.
+
+    Returns:
+        The basis (N, 5, 3); a column absent is zero.
+
+    Raises:
+        ValueError: ``q`` or ``gradient`` is not (N, 5) and finite, or a row of ``q`` is
+            zero.
     """
     q = _check_q(q)
     _check_nonzero(q)
@@ -290,6 +307,14 @@ def pushed_off_bound(q, direction, max_aspect: float) -> np.ndarray:
     The test of :func:`ufl_frames.frames2d.aspect.active_bound` with the step in place of
     the descent direction −g: the retraction would clamp these frames back onto the
     bound, bending the step (see ``GaussNewtonModel._consistent_active_set``).
+
+    Args:
+        q: coefficients (N, 5) on the variety.
+        direction: the step (N, 5).
+        max_aspect: the aspect bound A (finite, ≥ 1).
+
+    Returns:
+        (N,) bool, the frames on the bound that the step pushes outwards.
     """
     q = _check_q(q)
     direction = _check_q(direction, "direction")
@@ -313,6 +338,18 @@ def tangent_curvature(
     aspect-bound active set is decided by ``active_gradient`` (default ``gradient``), as
     in :func:`tangent_basis`, or given as ``active`` (N,) bool (frames on the bound only
     count), which is how a basis with a held set is matched.
+
+    Args:
+        q: coefficients (N, 5) on the variety.
+        gradient: g, the energy's gradient in q (N, 5).
+        max_aspect: the aspect bound A (None: no bound).
+        isotropic: frames with l1 = l2 (no e_d column: its rows and columns are zero).
+        active_gradient: (N, 5), decides the active set on the bound (None: ``gradient``).
+        active: (N,) bool, the active set given (frames on the bound only count);
+            None: decided by ``active_gradient``.
+
+    Returns:
+        W (N, 3, 3), symmetric, in the orthonormal columns of :func:`tangent_basis`.
     """
     q = _check_q(q)
     gradient = _check_q(gradient, "gradient")
@@ -535,6 +572,20 @@ def project(
     module docstring); ``method="mandel"`` is the note's eigentensor projection,
     kept for comparison only. ``max_aspect`` bounds l_max/l_min: the lengths at the
     closest angle are then fitted under the bound (:func:`clamp_aspect`).
+
+    Args:
+        q: coefficients (N, 5), none zero.
+        isotropic: the nearest frames with l1 = l2.
+        method: ``"closest"`` or ``"mandel"``.
+        max_aspect: the aspect bound A (None: no bound; ignored by ``"mandel"`` and for
+            isotropic frames).
+
+    Returns:
+        The projected coefficients (N, 5).
+
+    Raises:
+        ValueError: ``q`` is not (N, 5) and finite, a row is zero, or ``method`` is
+            unknown.
     """
     q = _check_q(q)
     _check_nonzero(q)
@@ -560,6 +611,20 @@ def project_aligned(
 
     One branch is aligned with the normal (the other with the tangent); the lengths
     are the least-squares fit of q at that orientation.
+
+    Args:
+        q: coefficients (N, 5).
+        normals: the direction of one branch at each frame (N, 2), finite and non-zero
+            (need not be unit).
+        isotropic: the lengths fitted with l1 = l2.
+        max_aspect: the aspect bound A on the fitted lengths (None: no bound).
+
+    Returns:
+        The projected coefficients (N, 5).
+
+    Raises:
+        ValueError: ``q`` is not (N, 5) and finite, or ``normals`` is not (N, 2), finite
+            and non-zero.
     """
     q = _check_q(q)
     normals = np.asarray(normals, dtype=np.float64)

@@ -61,6 +61,18 @@ def triangle_indices(cells, q, coords=None) -> np.ndarray:
     ``cells`` (M, 3) holds vertex indices into ``q`` (N, 5). Triangles are taken as
     counter-clockwise; pass ``coords`` (N, 2 or 3) to orient each one by its signed
     area instead (DOLFINx cells have no fixed orientation).
+
+    Args:
+        cells: vertex indices (M, 3) into ``q``.
+        q: coefficients (N, 5); the angle is read from (q3, q4).
+        coords: vertex coordinates (N, 2 or 3) (None: every triangle counter-clockwise).
+
+    Returns:
+        The indices (M,), multiples of 1/4.
+
+    Raises:
+        ValueError: a shape is wrong, ``cells`` are not integers or index outside ``q``,
+            or (q3, q4) is not finite.
     """
     cells, q, coords = _check(cells, q, coords)
     theta4 = np.arctan2(q[:, 4], q[:, 3])
@@ -76,7 +88,20 @@ def triangle_indices(cells, q, coords=None) -> np.ndarray:
 
 
 def find_singularities(cells, coords, q) -> list[dict]:
-    """Triangles of nonzero index as ``{"index", "x", "y"}`` (barycentres), sorted by (x, y)."""
+    """Triangles of nonzero index as ``{"index", "x", "y"}`` (barycentres), sorted by (x, y).
+
+    Args:
+        cells: vertex indices (M, 3) into ``q`` and ``coords``.
+        coords: vertex coordinates (N, 2 or 3); the triangles are oriented by them.
+        q: coefficients (N, 5).
+
+    Returns:
+        One dict a singular triangle: ``index`` (a multiple of 1/4) and its barycentre's
+        ``x``, ``y`` (floats).
+
+    Raises:
+        ValueError: as :func:`triangle_indices`, or ``coords`` is None.
+    """
     cells, q, coords = _check(cells, q, coords)
     if coords is None:
         raise ValueError("coords are required")
@@ -145,6 +170,15 @@ def index_theorem(singularities: list[dict], euler_characteristic: int, corner_a
     225°, 315°), where either rounding is right: ``expected`` is the lower sum (their k
     rounded down) and each widens the agreement by 1/4 above it. Indices are multiples
     of 1/4, so sums are compared exactly after rounding.
+
+    Args:
+        singularities: dicts with an ``index`` (e.g. :func:`find_singularities`).
+        euler_characteristic: χ of the domain.
+        corner_angles: the interior angles of the boundary corners, in radians.
+
+    Returns:
+        The dict above: ``index_sum`` and ``expected`` floats, ``agrees`` a bool, the
+        others ints.
     """
     angles = np.asarray(corner_angles, dtype=np.float64).ravel()
     index_sum = float(np.rint(4 * sum(float(s["index"]) for s in singularities)) / 4) + 0.0
