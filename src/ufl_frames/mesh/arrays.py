@@ -288,7 +288,16 @@ def _check_conforming(source: str, x, cells, boundary, cell_surface, own_cell) -
 
 
 def interior_angles(x, cells, n) -> np.ndarray:
-    """Sum of the triangle angles at every node (2π inside, the interior angle on ∂Ω)."""
+    """Sum of the triangle angles at every node (2π inside, the interior angle on ∂Ω).
+
+    Args:
+        x: node coordinates (n, 2).
+        cells: triangles (m, 3), node indices.
+        n: the number of nodes (the length of the result).
+
+    Returns:
+        The angle sums (n,), in radians (0 at a node of no triangle).
+    """
     total = np.zeros(n)
     for i in range(3):
         p, q, r = cells[:, i], cells[:, (i + 1) % 3], cells[:, (i + 2) % 3]

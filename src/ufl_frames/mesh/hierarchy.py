@@ -37,7 +37,17 @@ def auto_levels(num_cells: int) -> int:
 def check_levels(levels, name_or_path: str, conformal: bool) -> None:
     """Raise ValueError unless ``levels`` is 'auto' or a whole number from 1 to
     :data:`MAX_LEVELS`, and, above 1, of a geometry Gmsh meshes (not a ``.msh``) and a
-    TAO solve (not ``conformal``)."""
+    TAO solve (not ``conformal``).
+
+    Args:
+        levels: the number of meshes asked for, or 'auto'.
+        name_or_path: the geometry, a built-in shape's name or a file.
+        conformal: the run is the conformal scale (no TAO solve).
+
+    Raises:
+        ValueError: ``levels`` is neither 'auto' nor an integer from 1 to
+            :data:`MAX_LEVELS`, or above 1 with a ``.msh`` or with ``conformal``.
+    """
     if levels == "auto":
         return
     if isinstance(levels, bool) or not isinstance(levels, int) or not 0 < levels <= MAX_LEVELS:
@@ -54,7 +64,16 @@ def check_levels(levels, name_or_path: str, conformal: bool) -> None:
 def check_same_topology(level, domain, factor) -> None:
     """Raise :class:`~ufl_frames.mesh.GeometryError` unless the coarse ``level`` (at
     size factor ``factor``) keeps ``domain``'s holes and thin parts (its Euler
-    characteristic)."""
+    characteristic).
+
+    Args:
+        level: the coarse :class:`~ufl_frames.mesh.Domain`.
+        domain: the finest :class:`~ufl_frames.mesh.Domain`, at the size asked for.
+        factor: the size factor ``level`` was meshed at (named in the message).
+
+    Raises:
+        GeometryError: the two Euler characteristics differ.
+    """
     from ufl_frames import mesh as meshes
 
     if level.euler_characteristic != domain.euler_characteristic:

@@ -51,7 +51,16 @@ def boundary_segments(mesh) -> np.ndarray:
 
 
 def grid_points(lo, hi, spacing: float) -> np.ndarray:
-    """Points (M, 3) of the square grid of step ``spacing`` centred on the box [lo, hi]."""
+    """Points (M, 3) of the square grid of step ``spacing`` centred on the box [lo, hi].
+
+    Args:
+        lo: the box's lower corner (x, y).
+        hi: the box's upper corner (x, y).
+        spacing: the grid step (> 0).
+
+    Returns:
+        The grid points (M, 3), z = 0, x the slower index.
+    """
     axes = []
     for a, b in zip(lo, hi, strict=True):
         n = math.floor((b - a) / spacing) + 1
