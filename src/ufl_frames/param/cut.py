@@ -41,7 +41,17 @@ def _wrap(angle):
 
 
 def relabel(angle, l1, l2, k):
-    """The frame (angle, l1, l2) with its labels turned k quarter turns (k may be an array)."""
+    """The frame (angle, l1, l2) with its labels turned k quarter turns (k may be an array).
+
+    Args:
+        angle: the angle of the first branch, in radians (an array or a scalar).
+        l1: the length along ``angle``, broadcastable with ``angle``.
+        l2: the other length, likewise.
+        k: the quarter turns (any integers, taken mod 4).
+
+    Returns:
+        (angle + k·π/2, l1, l2) with l1 and l2 swapped where k is odd.
+    """
     k = np.mod(k, 4)
     odd = (k % 2) == 1
     return angle + k * QUARTER, np.where(odd, l2, l1), np.where(odd, l1, l2)
@@ -98,7 +108,19 @@ def singular_vertices(cells, angle, edges, faces, k=None) -> tuple[np.ndarray, n
 
     ``k``: the matchings (:func:`matchings`, the default); across edge e the frame turns by
     angle_g − angle_f + k_e · 90°, so a matching one off the nearest moves a quarter turn
-    from one end of the edge to the other (:func:`cancel_pairs`)."""
+    from one end of the edge to the other (:func:`cancel_pairs`).
+
+    Args:
+        cells: triangles (m, 3), counter-clockwise.
+        angle: the frame angle per triangle (m,) (:func:`face_frames`).
+        edges: the edge table (E, 2) (:func:`interior_edges`).
+        faces: the triangles of every edge (E, 2), −1 for none.
+        k: the matchings (E,) (None: :func:`matchings` of ``angle``).
+
+    Returns:
+        (singular, turns): the singular interior vertices and their turns in quarters,
+        both (s,) int.
+    """
     n = int(cells.max()) + 1
     boundary = np.zeros(n, bool)
     on_boundary = faces[:, 1] < 0
@@ -135,8 +157,23 @@ def cancel_pairs(x, cells, edges, faces, k, singular, turns, within: float):
     edges from one to the other, each edge's matching is turned by one quarter, which
     moves the quarter turn of the first vertex along the path onto the second, where it
     cancels. The field itself is not changed: its combing jumps by 90° across the path
-    instead, and the map absorbs that where the pair sat closer than a quad. Returns the
-    new matchings and the number of pairs cancelled."""
+    instead, and the map absorbs that where the pair sat closer than a quad.
+
+    Args:
+        x: vertex coordinates (n, 2).
+        cells: triangles (m, 3), counter-clockwise.
+        edges: the edge table (E, 2) (:func:`interior_edges`).
+        faces: the triangles of every edge (E, 2), −1 for none.
+        k: the matchings (E,) (:func:`matchings`); not modified.
+        singular: the singular vertices (s,) (:func:`singular_vertices`).
+        turns: their turns in quarters (s,); pairs are of +1 and −1.
+        within: the distance below which a pair is cancelled (half of it: a vertex moved
+            onto the boundary).
+
+    Returns:
+        (k, cancelled): the new matchings (E,) and the number of pairs cancelled plus
+        vertices moved onto the boundary.
+    """
     k = k.copy()
     positive, negative = singular[turns == 1], singular[turns == -1]
     distance = np.linalg.norm(x[positive][:, None] - x[negative][None], axis=2)
@@ -234,6 +271,20 @@ def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
     other than the longest of their component) and then from each singular vertex to the
     set cut so far, which starts as the longest boundary loop of every component of the
     mesh and grows by every path and loop added.
+
+    Args:
+        x: vertex coordinates (n, 2).
+        cells: triangles (m, 3).
+        edges: the edge table (E, 2) (:func:`interior_edges`).
+        faces: the triangles of every edge (E, 2), −1 for none.
+        singular: the vertices every cut must reach (s,).
+
+    Returns:
+        (cut, paths): the sorted edge ids to cut (int) and the number of paths added.
+
+    Raises:
+        ValueError: a loop or a singular vertex cannot be reached (the mesh is not
+            connected).
     """
     n = x.shape[0]
     length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
@@ -282,7 +333,20 @@ def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
 def comb(angle, faces, k, cut) -> np.ndarray:
     """Label turn r_f per triangle: r_g = r_f + k_fg across the edges of a spanning tree of
     the dual graph without the cut edges (breadth first from the first triangle of every
-    component of the mesh)."""
+    component of the mesh).
+
+    Args:
+        angle: the frame angle per triangle (m,) (only its length is used).
+        faces: the triangles of every edge (E, 2), −1 for none.
+        k: the matchings (E,).
+        cut: the cut edge ids (:func:`cut_graph`).
+
+    Returns:
+        r (m,), the turns in 0..3.
+
+    Raises:
+        ValueError: the cut splits a component of the mesh.
+    """
     m = angle.size
     inner = faces[:, 1] >= 0
     allowed = inner.copy()
@@ -317,7 +381,16 @@ def _comb_tree(r, order, predecessors, graph, faces, k) -> None:
 
 def jumps(faces, k, r) -> np.ndarray:
     """j_e = r_g − r_f − k_fg (mod 4) per edge: g's combed frame is f's turned by j_e
-    (0 wherever the combing is consistent; boundary edges 0)."""
+    (0 wherever the combing is consistent; boundary edges 0).
+
+    Args:
+        faces: the triangles of every edge (E, 2), −1 for none.
+        k: the matchings (E,).
+        r: the combing's turn per triangle (m,) (:func:`comb`).
+
+    Returns:
+        j (E,), in 0..3.
+    """
     j = np.zeros(faces.shape[0], dtype=np.int64)
     inner = faces[:, 1] >= 0
     f, g = faces[inner, 0], faces[inner, 1]
@@ -327,7 +400,17 @@ def jumps(faces, k, r) -> np.ndarray:
 
 def wedges(cells, edges, faces, cut) -> np.ndarray:
     """Vertex of the cut mesh of every triangle corner, shape (m, 3): corners of one vertex
-    are joined across every interior edge that is not cut."""
+    are joined across every interior edge that is not cut.
+
+    Args:
+        cells: triangles (m, 3).
+        edges: the edge table (E, 2) (:func:`interior_edges`).
+        faces: the triangles of every edge (E, 2), −1 for none.
+        cut: the cut edge ids (:func:`cut_graph`).
+
+    Returns:
+        The cut-mesh vertex (wedge) of every corner (m, 3), numbered 0..W−1.
+    """
     m = cells.shape[0]
     inner = faces[:, 1] >= 0
     joined = inner.copy()
@@ -385,7 +468,17 @@ class CutMesh:
 def cut_mesh(x, cells, q, cancel_within: float | None = None) -> CutMesh:
     """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``;
     with ``cancel_within``, opposite singular vertices closer than that are cancelled
-    (:func:`cancel_pairs`)."""
+    (:func:`cancel_pairs`).
+
+    Args:
+        x: vertex coordinates (n, 2 or 3); only x and y are used.
+        cells: triangles (m, 3), either orientation (turned counter-clockwise here).
+        q: the P1 frame field's coefficients (n, 5).
+        cancel_within: the distance of :func:`cancel_pairs` (None or 0: nothing cancelled).
+
+    Returns:
+        The :class:`CutMesh`, with the combed frames and the field's vertex angles.
+    """
     x = np.asarray(x, dtype=np.float64)[:, :2]
     cells = np.asarray(cells, dtype=np.int64)
     e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]

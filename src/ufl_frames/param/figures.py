@@ -22,7 +22,13 @@ def _cut_triangulation(p: Parametrisation):
 
 def plot_param(path, p: Parametrisation, title: str = "") -> None:
     """The domain with the integer iso-lines of U (blue) and V (red), the cut (black) and
-    flipped triangles (filled): a quad mesh appears where the map is good."""
+    flipped triangles (filled): a quad mesh appears where the map is good.
+
+    Args:
+        path: the image file to write (its suffix picks the format, e.g. ``.png``).
+        p: the parametrisation to draw.
+        title: the figure's title.
+    """
     import matplotlib
 
     matplotlib.use("Agg")

@@ -84,7 +84,16 @@ def boundary_coordinates(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def wedge_of(mesh: CutMesh, face: int, vertex: int) -> int:
-    """The cut-mesh vertex (wedge) of triangle ``face`` at mesh vertex ``vertex``."""
+    """The cut-mesh vertex (wedge) of triangle ``face`` at mesh vertex ``vertex``.
+
+    Args:
+        mesh: the cut mesh.
+        face: a triangle's index.
+        vertex: a mesh vertex of that triangle.
+
+    Returns:
+        The wedge's index.
+    """
     return int(mesh.corners[face, int(np.flatnonzero(mesh.cells[face] == vertex)[0])])
 
 
@@ -249,7 +258,16 @@ def least_squares_system(mesh: CutMesh, scale: float = 1.0, anchor=None):
 
 
 def parametrisation(mesh: CutMesh, uv: np.ndarray, scale: float) -> Parametrisation:
-    """The :class:`Parametrisation` of the wedge values ``uv`` (W, 2) at scale ``scale``."""
+    """The :class:`Parametrisation` of the wedge values ``uv`` (W, 2) at scale ``scale``.
+
+    Args:
+        mesh: the cut mesh with its combed field.
+        uv: (U, V) per wedge (W, 2).
+        scale: the global scale s of the targets.
+
+    Returns:
+        The record, with the Jacobian rows and targets per triangle.
+    """
     area, grad = gradients(mesh.x, mesh.cells)
     target_u, target_v = targets(mesh, scale)
     corner = uv[mesh.corners]  # (m, 3, 2)
@@ -282,7 +300,17 @@ def angle_sums(cells: np.ndarray, corners: np.ndarray, n: int) -> np.ndarray:
     points of every triangle's corners: the angle between the two edges, in [0, π],
     negative where the triangle is clockwise. A triangle flattened onto a segment (a
     rounded map has such slivers at grid points) counts 0 or π whichever sign round-off
-    gives its area: its signed angle would be ±π at random."""
+    gives its area: its signed angle would be ±π at random.
+
+    Args:
+        cells: vertex indices (m, 3) the angles are summed to.
+        corners: the points of every triangle's corners (m, 3, 2), in the order of
+            ``cells``.
+        n: the number of vertices (the length of the result).
+
+    Returns:
+        The signed angle sums (n,), in radians.
+    """
     total = np.zeros(n)
     for i in range(3):
         a = corners[:, (i + 1) % 3] - corners[:, i]
@@ -323,7 +351,18 @@ def invalid(p: Parametrisation) -> np.ndarray:
 
 def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarray:
     """argmin Σ_f w_f (misfit of triangle f)² over y, subject to F_fixed y = d if given
-    (``weight`` per triangle; AT, b of :func:`least_squares_system`), factorised anew."""
+    (``weight`` per triangle; AT, b of :func:`least_squares_system`), factorised anew.
+
+    Args:
+        AT: the misfit rows in y, (4m, free) sparse (:func:`least_squares_system`).
+        b: their right-hand side (4m,).
+        weight: w_f per triangle (m,).
+        F_fixed: the fixed functionals (S, free) sparse, or None (no constraint).
+        d: their values (S,).
+
+    Returns:
+        The free unknowns y.
+    """
     row_weight = np.sqrt(np.repeat(weight, 4))
     WA = sp.diags(row_weight) @ AT
     lu = spla.splu((WA.T @ WA).tocsc())
@@ -411,7 +450,16 @@ class SeamlessSystem:
         """The map with F y = d, its folded triangles and their neighbours weighted up
         (× :data:`REWEIGHT_FACTOR`, at most :data:`REWEIGHTINGS` rounds) until nothing
         folds: a fold is where the least squares traded orientation for misfit, and a
-        larger weight there buys it back."""
+        larger weight there buys it back.
+
+        Args:
+            F: the fixed functionals (S, free) in y, or None.
+            G: F N⁻¹ Fᵀ (the unweighted covariance of those functionals).
+            d: their integers.
+
+        Returns:
+            The last map tried (it may still fold after the last round).
+        """
         p = self.param(self.solve(F, G, d))
         weight = np.ones(self.mesh.cells.shape[0])
         for _ in range(REWEIGHTINGS):
@@ -425,7 +473,16 @@ class SeamlessSystem:
 
     def influence(self, F, G, triangles: np.ndarray) -> np.ndarray:
         """Per fixed functional (rows of F) how much the wedge values of ``triangles``
-        move per unit of its integer: Σ |∂x/∂d| over their corners' coordinates."""
+        move per unit of its integer: Σ |∂x/∂d| over their corners' coordinates.
+
+        Args:
+            F: the fixed functionals (S, free) in y.
+            G: F N⁻¹ Fᵀ.
+            triangles: the triangles' indices.
+
+        Returns:
+            The influence of every functional (S,).
+        """
         rows = (2 * self.mesh.corners[triangles].reshape(-1, 1) + np.arange(2)).ravel()
         # ∂y/∂d = N⁻¹ Fᵀ G⁻¹, so T_rows ∂y/∂d = (N⁻¹ T_rowsᵀ)ᵀ Fᵀ G⁻¹
         Z = self.lu.solve(self.T[rows].T.toarray())
@@ -436,6 +493,17 @@ def integrate(mesh: CutMesh, scale: float = 1.0, anchor=None,
               unfold_folds: bool = True) -> Parametrisation:
     """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``, zero
     at the ``anchor`` wedges (:func:`least_squares_system`); with ``unfold_folds``,
-    folded triangles re-weighted (:meth:`SeamlessSystem.unfold`)."""
+    folded triangles re-weighted (:meth:`SeamlessSystem.unfold`).
+
+    Args:
+        mesh: the cut mesh with its combed field.
+        scale: the global scale s.
+        anchor: the wedge, or one wedge per connected component, where (U, V) = 0
+            (default :func:`first_wedges`).
+        unfold_folds: re-weight folded triangles and solve again.
+
+    Returns:
+        The :class:`Parametrisation` (not integer: no rounding here).
+    """
     system = SeamlessSystem(mesh, scale, anchor)
     return system.unfold() if unfold_folds else system.param(system.y0)
