@@ -56,7 +56,19 @@ def write_field(out, frames, label: str, tao_type: str | None = None) -> list[st
 def write_param(out, param, label: str, comm, stem: str = "param") -> list[str]:
     """``<stem>.png`` (the integer iso-lines of U and V) and ``<stem>.vtu`` of a
     :class:`~ufl_frames.pipeline.stages.Parametrised` ``param``, written by rank 0 of
-    ``comm`` into the folder ``out``; the names written (collective)."""
+    ``comm`` into the folder ``out`` (collective).
+
+    Args:
+        out: the folder (it exists).
+        param: the :class:`~ufl_frames.pipeline.stages.Parametrised` (read on rank 0
+            only).
+        label: the geometry's name, for the figure's title.
+        comm: the field's communicator.
+        stem: the files' name without suffix.
+
+    Returns:
+        The names written, on every rank.
+    """
     from ufl_frames.param.figures import plot_param, write_param_vtu
 
     names = [f"{stem}.png", f"{stem}.vtu"]
@@ -73,7 +85,18 @@ def write_param(out, param, label: str, comm, stem: str = "param") -> list[str]:
 def write_quads(out, quads, label: str, comm, stem: str = "quads") -> list[str]:
     """``<stem>.msh`` (Gmsh MSH 4.1), ``<stem>.vtu`` (scaled Jacobian per quad) and
     ``<stem>.png`` of a :class:`~ufl_frames.pipeline.stages.QuadMeshed` ``quads``, written
-    by rank 0 of ``comm`` into the folder ``out``; the names written (collective)."""
+    by rank 0 of ``comm`` into the folder ``out`` (collective).
+
+    Args:
+        out: the folder (it exists).
+        quads: the :class:`~ufl_frames.pipeline.stages.QuadMeshed` (read on rank 0 only).
+        label: the geometry's name, for the figure's title.
+        comm: the field's communicator.
+        stem: the files' name without suffix.
+
+    Returns:
+        The names written, on every rank.
+    """
     from ufl_frames.quads.measures import scaled_jacobians
     from ufl_frames.quads.msh import plot_quads, write_quad_msh, write_quad_vtu
 

@@ -75,5 +75,14 @@ def findings_record(frames, param=None, quads=None) -> dict:
 
 def field_summary(frames, param=None, quads=None) -> dict:
     """:func:`frames_record` and :func:`findings_record` of ``frames`` in one record
-    (collective): a field's summary outside the command."""
+    (collective): a field's summary outside the command.
+
+    Args:
+        frames: the :class:`~ufl_frames.pipeline.field.FrameField`.
+        param: its :class:`~ufl_frames.pipeline.stages.Parametrised`, if made.
+        quads: its :class:`~ufl_frames.pipeline.stages.QuadMeshed`, if made.
+
+    Returns:
+        The record, keys in ``summary.json``'s order.
+    """
     return {**frames_record(frames), **findings_record(frames, param, quads)}
