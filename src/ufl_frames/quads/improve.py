@@ -26,7 +26,17 @@ def improve_worst_quads(points, quads, sweeps: int = 3, searches: int = 12) -> n
     one at a time, to raise the smallest SJ of its quads (a pattern search: 8 directions,
     the step halved when none helps, starting at a quarter of its mean edge); boundary
     vertices stay. A move is taken only if it raises that local minimum, so no quad
-    around a moved vertex ends worse than the worst one there before."""
+    around a moved vertex ends worse than the worst one there before.
+
+    Args:
+        points: the points (n, 2); not modified.
+        quads: point indices (m, 4), counter-clockwise.
+        sweeps: passes over the bad vertices at most (fewer when none is left).
+        searches: pattern-search steps per vertex and sweep.
+
+    Returns:
+        The moved points (n, 2), a new array.
+    """
     x = np.array(points, dtype=np.float64)
     quads = np.asarray(quads, dtype=np.int64)
     n = x.shape[0]

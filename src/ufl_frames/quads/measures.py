@@ -220,6 +220,16 @@ def check_quad_mesh(points, quads, area: float | None = None, rtol: float = 1e-9
     duplicated (with ``slits``, two boundary points may coincide: the two sides of a
     slit, a domain cut open along a curve); the total area within ``rtol`` of ``area``
     when given.
+
+    Args:
+        points: the points (n, 2).
+        quads: point indices (m, 4).
+        area: the domain's area (None: not checked).
+        rtol: the relative tolerance of the area check.
+        slits: allow two boundary points at one place.
+
+    Returns:
+        The problems found, one line each (the arrays' wrong shapes or indices too).
     """
     try:
         x, q = _arrays(points, quads)

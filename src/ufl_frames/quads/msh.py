@@ -109,6 +109,19 @@ def write_quad_msh(path, points, quads, boundary_edges=None) -> Path:
     ``boundary_edges`` (k, 2): the point pairs written as boundary lines (physical group
     ``boundary``); None: the mesh's boundary edges (:func:`mesh_boundary_edges`); an empty
     array: no lines and no boundary group. Node i is Gmsh node i + 1, quad j element j + 1.
+
+    Args:
+        path: the file to write; its suffix must be ``.msh``.
+        points: the points (n, 2).
+        quads: point indices (m, 4).
+        boundary_edges: the boundary lines (k, 2), as above.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        ValueError: ``path`` is not a ``.msh``, the arrays have a wrong shape, or an
+            index lies outside the points.
     """
     path = Path(path)
     if path.suffix.lower() != ".msh":
@@ -134,7 +147,16 @@ def write_quad_msh(path, points, quads, boundary_edges=None) -> Path:
 def gmsh_quality(points, quads, measure: str = "minSJ") -> np.ndarray:
     """Gmsh's ``getElementQualities`` of every quad (m,), ``measure`` one of Gmsh's names
     (``minSJ``, ``minSICN``, ``minSIGE``, ``gamma``, ...; module docstring). Gmsh ignores
-    the orientation: a clockwise square gets 1."""
+    the orientation: a clockwise square gets 1.
+
+    Args:
+        points: the points (n, 2).
+        quads: point indices (m, 4).
+        measure: the quality's Gmsh name.
+
+    Returns:
+        The quality of every quad (m,).
+    """
     x, q = _arrays(points, quads)
     with _gmsh_model("quads_quality") as gmsh:
         _add_quads(gmsh, x, q, np.zeros((0, 2), dtype=np.int64))
@@ -145,7 +167,20 @@ def gmsh_quality(points, quads, measure: str = "minSJ") -> np.ndarray:
 
 def write_quad_vtu(path, points, quads, cell_data: dict | None = None) -> Path:
     """Write the quad mesh with ``cell_data`` (name → (m,) or (m, c) array) as an ASCII
-    VTK XML unstructured grid (``.vtu``) for ParaView."""
+    VTK XML unstructured grid (``.vtu``) for ParaView.
+
+    Args:
+        path: the file to write.
+        points: the points (n, 2) (written with z = 0).
+        quads: point indices (m, 4).
+        cell_data: arrays per quad by name (None: none).
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        ValueError: the arrays have a wrong shape, or an index lies outside the points.
+    """
     x, q = _arrays(points, quads)
     m = q.shape[0]
 
@@ -185,7 +220,18 @@ def write_quad_vtu(path, points, quads, cell_data: dict | None = None) -> Path:
 def plot_quads(path, points, quads, title: str = "", highlight: bool = True) -> Path:
     """Picture of the quads coloured by scaled Jacobian (colour bar), with the irregular
     vertices marked: fewer edges than regular (valence 3 inside) as blue dots, more
-    (valence 5 inside) as red squares."""
+    (valence 5 inside) as red squares.
+
+    Args:
+        path: the image file to write (its suffix picks the format, e.g. ``.png``).
+        points: the points (n, 2).
+        quads: point indices (m, 4).
+        title: the figure's title.
+        highlight: mark the irregular vertices.
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
