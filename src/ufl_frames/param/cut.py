@@ -246,12 +246,12 @@ def _boundary_loops(edges, faces, n):
     """Vertex sets of the boundary's connected components, the outer (longest) first."""
     b = edges[faces[:, 1] < 0]
     graph = sp.csr_matrix((np.ones(b.shape[0]), (b[:, 0], b[:, 1])), shape=(n, n))
-    count, label = csgraph.connected_components(graph, directed=False)
-    on = np.zeros(n, bool)
-    on[b.ravel()] = True
-    loops = [np.flatnonzero((label == c) & on) for c in range(count)]
-    loops = [loop for loop in loops if loop.size]
-    return loops
+    _, label = csgraph.connected_components(graph, directed=False)
+    on = np.unique(b.ravel())  # every other vertex is a component of its own
+    order = np.argsort(label[on], kind="stable")
+    grouped = on[order]
+    starts = np.flatnonzero(np.diff(label[grouped], prepend=-1))
+    return np.split(grouped, starts[1:])
 
 
 def triangle_components(faces, m: int) -> tuple[int, np.ndarray]:
@@ -370,13 +370,15 @@ def comb(angle, faces, k, cut) -> np.ndarray:
 def _comb_tree(r, order, predecessors, graph, faces, k) -> None:
     """Turns ``r`` of a breadth-first tree's triangles (``order``, root first) from the
     root's, across the dual edges ``graph`` (edge id + 1) by the matchings ``k``."""
-    for child in order[1:]:
-        parent = predecessors[child]
-        e = int(graph[parent, child]) - 1
-        if faces[e, 0] == parent:  # k aligns faces[:, 1] (the child) to faces[:, 0]
-            r[child] = r[parent] + k[e]
-        else:  # the child is faces[e, 0]: the inverse turn
-            r[child] = r[parent] - k[e]
+    children = order[1:]
+    parents = predecessors[children]
+    e = np.asarray(graph[parents, children]).ravel().astype(np.int64) - 1
+    # k aligns faces[:, 1] to faces[:, 0]: a child that is faces[e, 0] takes the inverse
+    step = np.where(faces[e, 0] == parents, k[e], -k[e]).tolist()
+    turn = r.tolist()
+    for child, parent, d in zip(children.tolist(), parents.tolist(), step, strict=True):
+        turn[child] = turn[parent] + d  # breadth first: the parent is done
+    r[:] = turn
 
 
 def jumps(faces, k, r) -> np.ndarray:
