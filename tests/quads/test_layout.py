@@ -9,8 +9,10 @@ along mesh edges through vertices). The annulus field (r e_r, r e_θ): no singul
 corner, so one trace across the inner loop makes it one patch, n_θ × n_r quads on circles.
 Fields with singular vertices: 4 − turn separatrices each, the patches counted by Euler's
 formula (nodes − arcs + patches = 1 on a disk), the singular vertex a quad vertex of
-valence 4 − turn. Validity is checked by :func:`ufl_frames.quads.measures.check_quad_mesh`,
-written apart from the layout: conformity, orientation, area.
+valence 4 − turn; a valence-5 one a fraction of a quad from a straight side goes onto it
+(three quads), a valence-3 one stays inside. Validity is checked by
+:func:`ufl_frames.quads.measures.check_quad_mesh`, written apart from the layout:
+conformity, orientation, area.
 """
 
 import time
