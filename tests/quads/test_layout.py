@@ -9,8 +9,10 @@ along mesh edges through vertices). The annulus field (r e_r, r e_θ): no singul
 corner, so one trace across the inner loop makes it one patch, n_θ × n_r quads on circles.
 Fields with singular vertices: 4 − turn separatrices each, the patches counted by Euler's
 formula (nodes − arcs + patches = 1 on a disk), the singular vertex a quad vertex of
-valence 4 − turn. Validity is checked by :func:`ufl_frames.quads.measures.check_quad_mesh`,
-written apart from the layout: conformity, orientation, area.
+valence 4 − turn; a valence-5 one a fraction of a quad from a straight side goes onto it
+(three quads), a valence-3 one stays inside. Validity is checked by
+:func:`ufl_frames.quads.measures.check_quad_mesh`, written apart from the layout:
+conformity, orientation, area.
 """
 
 import time
@@ -438,3 +440,56 @@ def test_anisotropic_frames_set_the_two_counts():
     assert quads.num_quads == 18
     assert check_quad_mesh(quads.points, quads.quads, area=2.0, rtol=1e-9) == []
     assert grid_points(quads.points, np.array([2 / 3, 1 / 6])) < 1e-5
+
+
+def wall_pair_field(x, near, far, sign):
+    """Frames turning by ``sign``/4 around ``near`` and −``sign``/4 around ``far``, each
+    with its mirror image in the wall y = −1 (so the frames are aligned with it)."""
+    z = x[:, 0] + 1j * x[:, 1]
+    theta = 0.0
+    for c, s in ((near, sign), (far, -sign)):
+        theta = theta + s * (np.angle(z - complex(c[0], c[1]))
+                             + np.angle(z - complex(c[0], -2 - c[1])))
+    return odeco.frames_to_q(np.ones((x.shape[0], 2)), theta / 4)
+
+
+@pytest.mark.parametrize("sign, s", [(-1, 4.0), (1, 2.0)], ids=["valence-5", "valence-3"])
+def test_a_singular_vertex_near_the_boundary(sign, s, monkeypatch):
+    """A singular vertex 0.05 from the straight side y = −1 (its partner far inside), at s
+    quads per unit: its separatrix to the side is shorter than half a quad, so the thin
+    patches beside it may collapse and glue it to the side. Turn −1 (valence 5, s = 4):
+    two separatrices run along the side 0.2 quads away; the thin patches collapse, the
+    singular vertex goes onto the side as a boundary vertex in three quads (about 60°
+    each), and no quad edge is shorter than 0.35 of a quad (the sliver layer is gone).
+    Turn +1 (valence 3, s = 2): on the side it would be one quad with a 180° corner (as
+    it is with the fan rule off), so the collapse is refused: the vertex stays a
+    valence-3 vertex inside, the quads valid."""
+    d = 0.05
+    x, cells = grid(40, 40, -1, 1, -1, 1)
+    mesh = cut.cut_mesh(x, cells, wall_pair_field(x, (0.013, -1 + d), (0.02, 0.4), sign))
+    near = int(mesh.singular[np.argmin(mesh.x[mesh.singular, 1])])
+    assert mesh.turns[list(mesh.singular).index(near)] == sign
+    assert np.isclose(mesh.x[near, 1], -1 + d)
+    param = seamless.integrate(mesh, s)
+    quads, lay, n = patches.quads_of_map(param)
+    to_side = [a for a, arc in enumerate(lay.arcs) if lay.nodes[arc.start] == ("v", near)
+               and lay.nodes[arc.end][0] == "e" and arc.length < patches.COLLAPSE_BELOW]
+    assert len(to_side) == 1  # a collapse onto the side is possible
+    assert check_quad_mesh(quads.points, quads.quads, area=4.0, rtol=0.01) == []
+    P, Q = quads.points, quads.quads
+    at = np.flatnonzero(np.linalg.norm(P - mesh.x[near], axis=1) < 1e-12)
+    assert quad_quality(P, Q)["min_sj"] >= 0.5
+    if sign == -1:
+        assert at.size == 0 and n[to_side[0]] == 0 and np.count_nonzero(n == 0) == 3
+        on_side = np.flatnonzero((np.abs(P[:, 1] + 1) < 1e-9)
+                                 & (np.abs(P[:, 0] - mesh.x[near, 0]) < 0.5 / s))
+        assert on_side.size == 1 and np.count_nonzero(Q == on_side[0]) == 3
+        edges = np.linalg.norm(P[Q] - P[np.roll(Q, -1, axis=1)], axis=-1)
+        assert edges.min() * s > 0.35
+    else:
+        assert at.size == 1 and np.count_nonzero(Q == at[0]) == 3 and n[to_side[0]] == 1
+        monkeypatch.setattr(patches, "FAN_ANGLES", (0.0, 360.0))  # any fan
+        n = patches.integer_lengths(lay)
+        assert n[to_side[0]] == 0
+        glued = patches.patch_quads(lay, n)
+        assert quad_quality(glued.points, glued.quads)["min_sj"] < 0.05

@@ -8,10 +8,17 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    ``milp``). An arc shorter than ``collapse_below`` may get 0: a thin patch between two
    nearly collinear traces then collapses, its long sides glued point by point, which
    lines the two traces up (the separatrices of nearby singularities join). Other arcs
-   get at least 1. Where a collapse would put two singular vertices, or a singular vertex
-   and the boundary, on one point, glue two parts of the boundary (or a patch between two
-   boundary sides) together, or leave a kept patch with two corners on one point, the
-   arcs collapsed there get at least 1 and the program is solved again (until none does).
+   get at least 1. Where a collapse would put two singular vertices on one point inside,
+   glue two parts of the boundary (or a patch between two boundary sides) together, leave
+   a kept patch with two corners on one point, or glue singular vertices to the boundary
+   where the quads left there would not make a valid fan (:meth:`_Points.valid_fan`: the
+   domain's angle there shared by the quads, each within :data:`FAN_ANGLES`), the arcs
+   collapsed there get at least 1 and the program is solved again (until none does). So
+   a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
+   goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
+   its separatrices and the boundary collapse: no sliver layer); a valence-3 one (turn
+   +1) does not (one quad with a 180° corner); two valence-5 ones next to a 240° corner
+   (a sharp leading edge) go onto the corner, five quads of 48°.
    With every arc at least 1 (``collapse_below=0``) a solution always exists: the real
    lengths solve the equalities, so the rational cone they span holds integer points;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
@@ -20,7 +27,8 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    mapped back to the plane by walking the triangles of the map from the patch's corner
    (straight segments in the patch's chart, across seams). Arc points are computed once,
    so the patches that share an arc share its points: the quads are conforming; points
-   glued by a collapse become one (the singular vertex's, the boundary's, or their mean).
+   glued by a collapse become one (a boundary corner's, else the boundary's, else the
+   singular vertex's, else their mean).
 
 Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map (of one or
 more connected components: each has its own patches).
@@ -42,6 +50,11 @@ __all__ = ["COLLAPSE_BELOW", "integer_lengths", "patch_quads", "quads_of_map"]
 
 #: Arcs shorter than this (in quads) may get length 0 (:func:`integer_lengths`).
 COLLAPSE_BELOW = 0.5
+
+#: The angles (degrees) the quads at a singular vertex glued to the boundary may have on
+#: average (:meth:`_Points.valid_fan`): three at 60° on a straight boundary, five at 48°
+#: in a 240° corner; not one at 180°.
+FAN_ANGLES = (40.0, 135.0)
 
 
 def _solve(lay: Layout, lower: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -178,11 +191,12 @@ class _Points:
         return out
 
     def bad_merges(self) -> list:
-        """The zero arcs of the glues that put on one point two singular vertices, a
-        singular vertex and the boundary, two boundary points not joined along the
-        boundary by zero arcs (a part of the domain collapsed), or two neighbouring points
-        of a patch that keeps its quads; and those of a patch collapsed between two sides
-        on the boundary (the patch would be lost)."""
+        """The zero arcs of the glues that put on one point two singular vertices inside,
+        singular vertices and the boundary where the fan left is not valid
+        (:meth:`valid_fan`), two boundary points not joined along the boundary by zero
+        arcs (a part of the domain collapsed), or two neighbouring points of a patch that
+        keeps its quads; and those of a patch collapsed between two sides on the boundary
+        (the patch would be lost)."""
         mc = self.lay.motorcycles
         along = list(range(self.count))  # union–find of the zero boundary arcs alone
 
@@ -197,24 +211,72 @@ class _Points:
                 along[max(find(arc.start), find(arc.end))] = min(find(arc.start),
                                                                  find(arc.end))
         pieces: dict = {}
+        members: dict = {}
         for i in self.boundary_ids():
             pieces.setdefault(self.find(i), set()).add(find(i))
+            members.setdefault(self.find(i), []).append(i)
         bad = {root for root, parts in pieces.items() if len(parts) > 1}
         for runs in self.runs:  # a patch left with quads whose two corners are one point
             if len(runs[0]) > 1 and len(runs[1]) > 1:
                 for ids in runs:
                     bad.update(self.find(u) for u, v in zip(ids, ids[1:], strict=False)
                                if self.find(u) == self.find(v))
-        seen = set()
+        seen, fans, quads = set(), {}, None
         for i, key in enumerate(self.lay.nodes):
             if key[0] == "v" and key[1] in mc.singular:
                 root = self.find(i)
-                if root in seen or root in pieces:
+                if root in pieces:  # onto the boundary: where the fan left there is valid
+                    if root not in fans:
+                        quads = self.quads_at() if quads is None else quads
+                        fans[root] = self.valid_fan(members[root], quads.get(root, 0))
+                    if not fans[root]:
+                        bad.add(root)
+                elif root in seen:  # two singular vertices inside
                     bad.add(root)
                 seen.add(root)
         return sorted({a for arcs, pairs in self.events
                        if any(self.find(p) in bad for p, _ in pairs) for a in arcs}
                       | set(self.lost))
+
+    def quads_at(self) -> dict:
+        """Per glued point (root) the number of quads of the kept patches at it: one at a
+        patch's corner, two at a point inside a side."""
+        out: dict = {}
+        for runs in self.runs:
+            if len(runs[0]) > 1 and len(runs[1]) > 1:
+                for ids in runs:
+                    out[self.find(ids[0])] = out.get(self.find(ids[0]), 0) + 1
+                    for u in ids[1:-1]:
+                        out[self.find(u)] = out.get(self.find(u), 0) + 2
+        return out
+
+    def valid_fan(self, ids, quads: int) -> bool:
+        """Whether ``quads`` quads at the boundary points ``ids`` glued into one (with
+        singular vertices) make a valid fan: the domain's angle there (each point's angle in
+        the triangles, π inside a boundary edge; the glued points' angles together, less π
+        per glue along the boundary) shared by the quads within [:data:`FAN_ANGLES`]. A
+        valence-5 singular vertex (turn −1) on a straight boundary: three quads at 60°,
+        valid; a valence-3 one (turn +1): one quad with a 180° corner, not."""
+        mc = self.lay.motorcycles
+        nodes = len(self.lay.nodes)
+        total = 0.0
+        for i in ids:
+            key = self.lay.nodes[i] if i < nodes else None
+            total += _angle(mc, key[1]) if key is not None and key[0] == "v" else math.pi
+        total -= math.pi * (len(ids) - 1)
+        low, high = FAN_ANGLES
+        return quads >= 1 and math.radians(low) <= total / quads <= math.radians(high)
+
+
+def _angle(mc, w) -> float:
+    """The angle of the domain at vertex w in the plane (its triangles' angles at w)."""
+    x = mc.mesh.x
+    total = 0.0
+    for f, loc, _ in mc.fan(w):
+        c = mc.cells[f]
+        a, b = x[c[(loc + 1) % 3]] - x[c[loc]], x[c[(loc + 2) % 3]] - x[c[loc]]
+        total += math.atan2(a[0] * b[1] - a[1] * b[0], a @ b)
+    return total
 
 
 def _physical(mc, f, X):
@@ -403,16 +465,19 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
         raise LayoutError("no quads at this size (every patch collapses): take a smaller "
                           "quad size")
     quads = np.concatenate(quads)
-    # glued points: one point each, the singular vertex's, else the boundary's, else the mean
+    # glued points: one point each, a corner's, else the boundary's (a singular vertex
+    # glued to the boundary goes there), else the singular vertex's, else the mean
     total = len(position)
     root = np.array([pts.find(i) if i < pts.count else i for i in range(total)])
-    rank = np.full(total, 2)
+    rank = np.full(total, 3)
+    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 2
     rank[list(pts.boundary_ids())] = 1
-    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 0
+    rank[[i for i, key in enumerate(lay.nodes)
+          if key[0] == "v" and mc.on_boundary[key[1]] and mc.quarters(key[1]) != 2]] = 0
     xy = np.array([np.asarray(p, dtype=float) for p in position])
     used, quads = np.unique(root[quads], return_inverse=True)
     quads = quads.reshape(-1, 4)
-    best = np.full(total, 3)
+    best = np.full(total, 4)
     np.minimum.at(best, root, rank)
     chosen = rank == best[root]
     sums = np.zeros((total, 2))
