@@ -328,8 +328,16 @@ def solve(
     options.setdefault("tao_gatol", gttol * scale)
     options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
-        return _TaoSolve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
-                         coarse_energy).run()
+        runner = _TaoSolve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
+                           coarse_energy)
+        try:
+            return runner.run()
+        finally:
+            # The callbacks (bound methods) and the model refer to the runner and it to
+            # them: a cycle that only the garbage collector would free, at a different time
+            # on every rank, and a PETSc object freed then is a collective call on one
+            # rank only (a hang). Broken here, so all of it goes now, on every rank.
+            runner.__dict__.clear()
 
 
 def tao_callbacks(problem: FrameProblem):
