@@ -136,3 +136,30 @@ def test_a_slit_and_two_components_give_valid_quads(name, tmp_path):
     if COMM.rank == 0:
         assert boundary_length(quads.mesh.points, quads.mesh.quads) == pytest.approx(
             perimeter, rel=1e-9)
+
+
+def test_where_the_layout_cannot_be_made_greedy_rounding_makes_the_quads(monkeypatch):
+    """A layout that raises (a map folded where a trace runs, say) hands over to greedy
+    rounding, whose quads are kept and say why; where both fail, one error names both."""
+    from ufl_frames.pipeline import stages
+    from ufl_frames.quads.charts import LayoutError
+
+    field = FrameField.initial(piano(COMM, 0.1), isotropic=True).conformal()
+
+    def no_layout(mesh, seamless_map):
+        raise LayoutError("a face turns past the outside of the domain")
+
+    monkeypatch.setattr(stages, "_by_layout", no_layout)
+    quads = quadrangulate(field, 0.1)
+    assert quads.quality["valid"] and quads.quality["quantisation"] == "greedy"
+    assert "turns past the outside" in quads.quality["fallback_reason"]
+    assert quads.quality["interior_valence"].get("3") == 1
+    assert quads.quality["interior_valence"].get("5") == 1
+
+    def no_rounding(mesh, seamless_map):
+        raise ValueError("the integer-grid map folds")
+
+    monkeypatch.setattr(stages, "_by_rounding", no_rounding)
+    with pytest.raises(ValueError, match="layout: a face turns.*greedy rounding: the "
+                       "integer-grid map folds; take a smaller quad size"):
+        quadrangulate(field, 0.1)

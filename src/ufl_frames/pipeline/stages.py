@@ -194,18 +194,19 @@ def _quad_mesh(mesh, size: float):
     from ufl_frames.param import measures as param_measures
     from ufl_frames.param import seamless
     from ufl_frames.quads import measures
+    from ufl_frames.quads.charts import LayoutError
+    from ufl_frames.quads.extract import ExtractionError
 
     start = time.perf_counter()
     scale = seamless.scale_for_quad_size(mesh, size)
     seamless_map = seamless.integrate(mesh, scale)
     integrated = time.perf_counter()
     failures, kept = [], None
-    for method in (_by_layout, _by_rounding):
-        name = method.__doc__.split(":")[0]
+    for name, method in (("layout", _by_layout), ("greedy rounding", _by_rounding)):
         begun = time.perf_counter()
         try:
             quad_mesh, record = method(mesh, seamless_map)
-        except ValueError as e:  # LayoutError, QuantisationError, ExtractionError
+        except (ValueError, LayoutError, ExtractionError) as e:  # QuantisationError: a ValueError
             failures.append(f"{name}: {_one_line(e)}")
             continue
         quad_mesh, as_extracted = _improved(quad_mesh)
@@ -223,7 +224,9 @@ def _quad_mesh(mesh, size: float):
         failures.append(f"{name}: its worst quad has a scaled Jacobian of {worst:.2g}, under "
                         f"{MIN_SJ}")
     if kept is None:
-        raise ValueError("; ".join(failures) + "; take a smaller quad size")
+        advice = "" if failures[-1].endswith("take a smaller quad size") else \
+            "; take a smaller quad size"
+        raise ValueError("; ".join(failures) + advice)
     _, quad_mesh, record, as_extracted, quantised = kept
     area = float(seamless_map.area.sum())
     found = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
