@@ -48,10 +48,13 @@ def test_piano_quads_have_exactly_the_fields_two_singularities(piano_fields, qua
     assert world["area_error"] < 0.01  # straight quad edges on the curved boundary
     for key in ("quads", "vertices", "interior_valence", "irregular_vertices"):
         assert found["self"][key] == world[key], key
-    # as extracted, the meshes agree to solver tolerance; the improvement of the worst quads
-    # is a discrete search (accepts or not), so only its bound is the same
+    # as made, the meshes agree to solver tolerance: the fields of 1 and 2 ranks agree to
+    # TAO's relative gradient test (1e-6), and the T-mesh's quad points are the map's
+    # values, which move with the field to first order (measured: 1.2e-6 and 1.6e-6
+    # relative in the worst SJ); the improvement of the worst quads is a discrete search
+    # (accepts or not), so only its bound is the same
     assert found["self"]["extracted"]["min_sj"] == pytest.approx(
-        world["extracted"]["min_sj"], rel=1e-6)
+        world["extracted"]["min_sj"], rel=1e-5)
     assert found["self"]["min_sj"] >= 0.5
 
 
