@@ -156,7 +156,7 @@ def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
 
     root = _root(source)
     size = mean_cell_edge(root.domain.mesh) if quad_size is None else float(quad_size)
-    kept, quality = root.on_root(lambda mesh: _quad_mesh(mesh, size),
+    kept, quality = root.on_root(lambda mesh: _quad_mesh_or_advice(mesh, size),
                                  "cannot make quads of this field")
     return QuadMeshed(quality=quality, mesh=kept)
 
@@ -183,14 +183,36 @@ def _euler(mesh) -> int:
     return int(used.size - mesh.edges.shape[0] + mesh.cells.shape[0])
 
 
-def _quad_mesh(mesh, size: float):
+#: Quad sizes (as shares of the asked one) tried, by the layout alone, where no valid mesh
+#: comes out at the asked size, so that the refusal can say which size would work.
+SMALLER_SIZES = (0.7, 0.5)
+
+
+def _quad_mesh_or_advice(mesh, size: float):
+    """:func:`_quad_mesh`; where it fails, the error says which smaller quad size (of
+    :data:`SMALLER_SIZES`) gives a valid mesh by the layout, or that none of them does."""
+    try:
+        return _quad_mesh(mesh, size)
+    except ValueError as e:
+        failure = str(e)
+    for share in SMALLER_SIZES:
+        try:
+            _quad_mesh(mesh, share * size, methods=("layout",))
+        except ValueError:
+            continue
+        raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
+    raise ValueError(f"{failure} (quad sizes {', '.join(f'{f * size:.3g}' for f in SMALLER_SIZES)} "
+                     "fail too)")
+
+
+def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
     """(the quad mesh, its measures) of the cut mesh ``mesh`` at quad size ``size``: by
     the T-mesh layout of the seamless map (:func:`~ufl_frames.quads.patches.quads_of_map`,
     valid by construction where the map's traces do not fold), else by greedy rounding and
     iso-line extraction (:func:`~ufl_frames.param.quantise.quantise`,
     :func:`~ufl_frames.quads.extract.extract_quads`); the first whose quads pass the
     checks (:func:`_problems`) with no scaled Jacobian under :data:`MIN_SJ` is kept, else
-    the valid one with the better worst quad."""
+    the valid one with the better worst quad (of ``methods``, in their order)."""
     from ufl_frames.param import measures as param_measures
     from ufl_frames.param import seamless
     from ufl_frames.quads import measures
@@ -202,7 +224,8 @@ def _quad_mesh(mesh, size: float):
     seamless_map = seamless.integrate(mesh, scale)
     integrated = time.perf_counter()
     failures, kept = [], None
-    for name, method in (("layout", _by_layout), ("greedy rounding", _by_rounding)):
+    known = {"layout": _by_layout, "greedy rounding": _by_rounding}
+    for name, method in ((name, known[name]) for name in methods):
         begun = time.perf_counter()
         try:
             quad_mesh, record = method(mesh, seamless_map)
