@@ -328,16 +328,8 @@ def solve(
     options.setdefault("tao_gatol", gttol * scale)
     options.setdefault("tao_fmin", ENERGY_RTOL * problem.energy_scale)
     with petsc_defaults(options_prefix, options):
-        runner = _TaoSolve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
-                           coarse_energy)
-        try:
-            return runner.run()
-        finally:
-            # The callbacks (bound methods) and the model refer to the runner and it to
-            # them: a cycle that only the garbage collector would free, at a different time
-            # on every rank, and a PETSc object freed then is a collective call on one
-            # rank only (a hang). Broken here, so all of it goes now, on every rank.
-            runner.__dict__.clear()
+        return _TaoSolve(problem, tao_type, options_prefix, monitor, checkpoint, resume,
+                         coarse_energy).run()
 
 
 def tao_callbacks(problem: FrameProblem):
@@ -623,6 +615,11 @@ class _TaoSolve:
             x = self.initial_iterate(owned)
             g = x.duplicate()
             owned.callback(g.destroy)
+            # The model refers back to this runner (model.on_error): a cycle that only the
+            # garbage collector would free, at a different time on every rank, and a PETSc
+            # object freed then is a collective on one rank only (a hang). Dropped on the
+            # way out, so it all goes when the solve ends, on every rank.
+            owned.callback(setattr, self, "model", None)
             self.model = self.newton_model(owned, x)
             tao = self.create_tao(owned, x, g)
             original_tests = (_continue_tests(tao, self.resume) if self.resume is not None
