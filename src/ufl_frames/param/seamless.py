@@ -33,7 +33,7 @@ import scipy.sparse.linalg as spla
 from ufl_frames.param.cut import CutMesh, triangle_components
 
 __all__ = ["Parametrisation", "SeamlessSystem", "angle_sums", "boundary_coordinates",
-           "first_wedges", "folded", "gradients", "integrate", "invalid",
+           "elimination", "first_wedges", "folded", "gradients", "integrate", "invalid",
            "least_squares_system", "miswound", "parametrisation", "quarter_turn",
            "scale_for_quad_count", "scale_for_quad_size", "targets", "wedge_of",
            "weighted_solve"]
@@ -221,6 +221,12 @@ class Parametrisation:
         return self.uv[self.mesh.corners]
 
 
+def elimination(mesh: CutMesh, anchor=None) -> sp.csr_matrix:
+    """T (2W × free) with x = T y for every wedge vector x that satisfies the seams, the
+    boundary alignment and the anchors (``anchor`` as in :func:`least_squares_system`)."""
+    return _eliminate(_constraints(mesh, anchor), 2 * mesh.num_wedges)
+
+
 def least_squares_system(mesh: CutMesh, scale: float = 1.0, anchor=None):
     """The seamless problem in the free unknowns y.
 
@@ -253,7 +259,7 @@ def least_squares_system(mesh: CutMesh, scale: float = 1.0, anchor=None):
     b = np.empty(4 * m)
     b[0::4], b[1::4] = weight * target_u[:, 0], weight * target_u[:, 1]
     b[2::4], b[3::4] = weight * target_v[:, 0], weight * target_v[:, 1]
-    T = _eliminate(_constraints(mesh, anchor), count)
+    T = elimination(mesh, anchor)
     return (A @ T).tocsc(), b, T
 
 

@@ -15,7 +15,7 @@ Pure NumPy/SciPy.
 import numpy as np
 import scipy.sparse as sp
 
-from ufl_frames.param.seamless import Parametrisation, least_squares_system
+from ufl_frames.param.seamless import Parametrisation, elimination
 
 __all__ = ["UNIT", "LayoutError", "fixed_point"]
 
@@ -30,8 +30,8 @@ class LayoutError(RuntimeError):
 
 def fixed_point(param: Parametrisation, T=None, unit: int = UNIT) -> np.ndarray:
     """The wedge values as exact integers: x = T y with T the seamless constraints'
-    elimination (``least_squares_system``; its entries are halves where a singular vertex
-    is in them) and y the free values rounded to a multiple of T's denominator, so that
+    elimination (:func:`~ufl_frames.param.seamless.elimination`; its entries are halves
+    where a singular vertex is in them) and y the free values rounded to a multiple of T's denominator, so that
     every seam's transition and every boundary curve hold exactly.
 
     Args:
@@ -44,7 +44,7 @@ def fixed_point(param: Parametrisation, T=None, unit: int = UNIT) -> np.ndarray:
     """
     mesh = param.mesh
     if T is None:
-        _, _, T = least_squares_system(mesh, param.scale, 0)
+        T = elimination(mesh, 0)
     Tr = T.tocsr()
     Tr.sum_duplicates()
     x0 = (param.uv - param.uv[0]).ravel()
