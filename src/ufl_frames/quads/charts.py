@@ -31,8 +31,8 @@ class LayoutError(RuntimeError):
 def fixed_point(param: Parametrisation, T=None, unit: int = UNIT) -> np.ndarray:
     """The wedge values as exact integers: x = T y with T the seamless constraints'
     elimination (:func:`~ufl_frames.param.seamless.elimination`; its entries are halves
-    where a singular vertex is in them) and y the free values rounded to a multiple of T's denominator, so that
-    every seam's transition and every boundary curve hold exactly.
+    where a singular vertex is in them) and y the free values rounded to a multiple of T's
+    denominator, so that every seam's transition and every boundary curve hold exactly.
 
     Args:
         param: the seamless map (its values less those of wedge 0).
