@@ -133,7 +133,7 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -
 def _areas(mesh):
 
     x = mesh.geometry.x[:, :2]
-    c = mesh.geometry.dofmap
+    c = mesh.geometry.dofmaps[0]
     a, b, d = x[c[:, 0]], x[c[:, 1]], x[c[:, 2]]
     return 0.5 * ((b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1])
                   - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0]))

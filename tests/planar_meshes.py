@@ -36,3 +36,20 @@ def annulus(nr, nt, r0=0.5, r1=1.0):
 def annulus_field(x):
     r, theta = np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])
     return odeco.frames_to_q(np.stack([r, r], axis=1), theta)
+
+
+def assert_polar_grid(quads, n_theta: int, n_r: int, r0: float, r1: float) -> None:
+    """The quads of the annulus r0 ≤ r ≤ r1 are the structured polar grid: n_θ × n_r valid
+    quads, every interior vertex of valence 4, the corners on the n_r + 1 circles
+    r0 (r1/r0)^(k/n_r), n_θ on each."""
+    from ufl_frames.quads.measures import check_quad_mesh, quad_quality
+
+    assert quads.num_quads == n_theta * n_r
+    assert check_quad_mesh(quads.points, quads.quads) == []
+    quality = quad_quality(quads.points, quads.quads)
+    assert quality["irregular_vertices"] == 0
+    assert quality["interior_valence"] == ({"4": n_theta * (n_r - 1)} if n_r > 1 else {})
+    r = np.hypot(*quads.points.T)
+    k = np.log(r / r0) / np.log(r1 / r0) * n_r
+    assert np.abs(k - np.rint(k)).max() < 0.05
+    assert np.bincount(np.rint(k).astype(int)).tolist() == [n_theta] * (n_r + 1)

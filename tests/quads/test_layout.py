@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from planar_meshes import annulus, annulus_field, grid
+from planar_meshes import annulus, annulus_field, assert_polar_grid, grid
 from test_quads import constant_field, pair_field, wobble
 
 from ufl_frames.frames2d import odeco
@@ -102,15 +102,7 @@ def test_annulus_is_one_patch_across_the_seam(scale):
     n_theta = int(np.rint(around[0]))
     assert around == pytest.approx([2 * np.pi * scale] * 2, rel=0.02)
     assert sorted(n.tolist()) == [n_r, n_theta, n_theta]
-    assert quads.num_quads == n_theta * n_r
-    assert check_quad_mesh(quads.points, quads.quads) == []
-    quality = quad_quality(quads.points, quads.quads)
-    assert quality["irregular_vertices"] == 0
-    assert quality["interior_valence"] == ({"4": n_theta * (n_r - 1)} if n_r > 1 else {})
-    r = np.hypot(*quads.points.T)
-    k = np.log(r / r0) / np.log(r1 / r0) * n_r
-    assert np.abs(k - np.rint(k)).max() < 0.05
-    assert np.bincount(np.rint(k).astype(int)).tolist() == [n_theta] * (n_r + 1)
+    assert_polar_grid(quads, n_theta, n_r, r0, r1)
 
 
 def quarter_field(x, centre=(-0.07, -0.13)):

@@ -13,7 +13,7 @@ from the extraction: conformity, orientation, area.
 
 import numpy as np
 import pytest
-from planar_meshes import annulus, annulus_field, grid
+from planar_meshes import annulus, annulus_field, assert_polar_grid, grid
 
 from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, quantise, seamless
@@ -74,16 +74,7 @@ def test_annulus_gives_a_structured_polar_grid(scale):
     seam = grid_map.values[grid_map.kinds == "seam"]
     assert set(np.abs(seam).astype(int)) <= {0, n_theta}  # the period across the cut
     quads = extract.extract_quads(grid_map)
-    assert quads.num_quads == n_theta * n_r
-    assert check_quad_mesh(quads.points, quads.quads) == []
-    quality = quad_quality(quads.points, quads.quads)
-    assert quality["irregular_vertices"] == 0
-    assert quality["interior_valence"] == ({"4": n_theta * (n_r - 1)} if n_r > 1 else {})
-    # the corners on n_r + 1 circles r0 (r1/r0)^(k/n_r), n_θ on each
-    r = np.hypot(*quads.points.T)
-    k = np.log(r / r0) / np.log(r1 / r0) * n_r
-    assert np.abs(k - np.rint(k)).max() < 0.05
-    assert np.bincount(np.rint(k).astype(int)).tolist() == [n_theta] * (n_r + 1)
+    assert_polar_grid(quads, n_theta, n_r, r0, r1)
 
 
 def test_too_coarse_grids_are_refused_or_repaired():
