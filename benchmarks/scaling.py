@@ -11,7 +11,7 @@ peak memory is its own: the whole run as the CLI does it, through
 :class:`ufl_frames.pipeline.FrameField` — Gmsh meshing and distribution (``mesh``), the MBO
 initial field (``mbo``), the TAO solve with the defaults (``solve``), and the ParaView files
 and figures (``write``), with ``--quads`` the quad mesh at the default quad size (``quads``:
-its quantise, extract and improve seconds in a second table). Sizes are given as triangle
+its method and its integrate and quantise seconds in a second table). Sizes are given as triangle
 counts (``--triangles``: the mesh size is chosen from the measured counts at h = 0.05,
 N ~ 1/h²: piano 1887, annulus 2305) or as mesh sizes (``--sizes``). ``--np-largest`` runs
 the largest size on that many ranks instead.
@@ -120,7 +120,8 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     if quads:  # the default quad size: the triangles' mean edge
         found = stage("quads", lambda: quadrangulate(field).quality)
         quad_record = {key: found[key] for key in ("quads", "irregular_vertices", "min_sj",
-                                                   "mean_sj", "valid", "seconds")}
+                                                   "mean_sj", "valid", "quantisation",
+                                                   "seconds")}
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)
     krylov = result.krylov_iterations or []
     newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
@@ -175,7 +176,7 @@ def print_quad_table(records) -> None:
     """The quad stage per run: its sub-stages' seconds and the mesh it made."""
     from _common import table_rule
 
-    head = ("\n| case | triangles | quads | quantise s | extract s | improve s | quads s "
+    head = ("\n| case | triangles | quads | method | integrate s | quantise s | quads s "
             "| µs per triangle | irregular | min SJ | valid |")
     print(head)
     print(table_rule(head))
@@ -184,8 +185,8 @@ def print_quad_table(records) -> None:
         if not q:
             continue
         sec = q["seconds"]
-        print(f"| {r['case']} | {r['triangles']} | {q['quads']} | {sec['quantise']:.2f} "
-              f"| {sec['extract']:.2f} | {sec['improve']:.2f} | {r['stages']['quads']:.2f} "
+        print(f"| {r['case']} | {r['triangles']} | {q['quads']} | {q['quantisation']} "
+              f"| {sec['integrate']:.2f} | {sec['quantise']:.2f} | {r['stages']['quads']:.2f} "
               f"| {1e6 * r['stages']['quads'] / r['triangles']:.0f} "
               f"| {q['irregular_vertices']} | {q['min_sj']:.3f} | {q['valid']} |")
 
