@@ -45,6 +45,18 @@ class Corner:
         return int(round(self.angle / (math.pi / 2)))
 
 
+@dataclass(frozen=True)
+class PhysicalGroup:
+    """A named group of model entities of the file (Gmsh's ``Physical Curve`` /
+    ``Physical Surface`` / ``Physical Point``): its dimension, number, name ('' where the
+    file gives none) and the tags of its entities."""
+
+    dim: int
+    tag: int
+    name: str
+    entities: tuple[int, ...]
+
+
 @dataclass
 class Domain:
     """A meshed planar domain: what the frame-field pipeline needs of the geometry.
@@ -66,6 +78,8 @@ class Domain:
     requested_mesh_size: float | None
     source: str
     notes: tuple[str, ...] = ()
+    #: The file's physical groups (empty: the file has none, or a built-in shape).
+    physical_groups: tuple[PhysicalGroup, ...] = ()
     #: Boundary directions from the CAD model: sorted input node indices and the cross
     #: angle ψ (a tangent's angle, mod π/2) at each of them.
     _direction_nodes: np.ndarray = field(default=None, repr=False)
