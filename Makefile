@@ -13,7 +13,7 @@ VENV_PURE  := .venv-pure
 PY_PURE    := $(VENV_PURE)/bin/python
 STAMP_PURE := $(VENV_PURE)/.installed
 # The pure layer is selected by folder: the tests of the packages that need no DOLFINx.
-PURE_TESTS := tests/frames2d tests/param tests/quads tests/benchmarks
+PURE_TESTS := tests/frames2d tests/frames3d tests/param tests/quads tests/benchmarks
 # One BLAS thread per process: the suite runs two MPI ranks on small dense problems.
 export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
