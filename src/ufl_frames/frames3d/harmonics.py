@@ -140,11 +140,13 @@ _RAISE_TO_Q = np.concatenate([_RAISE[:, k, :] @ TO_Q.T for k in range(3)])
 
 def _cubic_monomials(u: np.ndarray) -> np.ndarray:
     """The weighted cubic monomials (N, 10) of u: (u·x)³ = Σ_β weight(β) u^β x^β."""
-    u = np.ascontiguousarray(u)
-    powers = np.stack([np.ones_like(u), u, u * u, u * u * u], axis=2)  # (N, 3, 4): u_k^e
-    cubic = (powers[:, 0, _CUBIC_EXPONENTS[:, 0]] * powers[:, 1, _CUBIC_EXPONENTS[:, 1]]
-             * powers[:, 2, _CUBIC_EXPONENTS[:, 2]])
-    return cubic * _CUBIC_WEIGHTS
+    x, y, z = (np.ascontiguousarray(u[:, k]) for k in range(3))
+    xx, yy, zz = x * x, y * y, z * z
+    out = np.empty((u.shape[0], len(_CUBICS)))
+    for column, monomial in enumerate((xx * x, xx * y, xx * z, x * yy, x * y * z, x * zz,
+                                       yy * y, yy * z, y * zz, zz * z)):
+        out[:, column] = monomial
+    return out * _CUBIC_WEIGHTS
 
 
 def power_coefficients(u: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
