@@ -70,7 +70,7 @@ class RootField:
         from ufl_frames.param import cut
 
         if self._cut is None:
-            self._cut = cut.cut_mesh(*self._arrays)
+            self._cut = cut.cut_mesh(*self._arrays, features=getattr(self, "features", None))
         return self._cut
 
     def on_root(self, work, failure: str):
@@ -197,12 +197,26 @@ def _quad_mesh_or_advice(mesh, size: float):
         failure = str(e)
     for share in SMALLER_SIZES:
         try:
-            _quad_mesh(mesh, share * size, methods=("layout",))
+            _quad_mesh(mesh, share * size, methods=_methods(mesh, ("layout",)))
         except ValueError:
             continue
         raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
     raise ValueError(f"{failure} (quad sizes {', '.join(f'{f * size:.3g}' for f in SMALLER_SIZES)} "
                      "fail too)")
+
+
+def _methods(mesh, methods):
+    """``methods`` without the layout where the cut mesh's features have interior curves
+    or model points off the boundary: its T-mesh does not know them yet (greedy rounding
+    makes them integer iso-lines and grid points, :mod:`~ufl_frames.param.quantise`)."""
+    features = mesh.features
+    if features is None:
+        return tuple(methods)
+    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
+    inside_points = np.setdiff1d(np.asarray(features.point_nodes), boundary).size > 0
+    if features.interior_curve_edges(mesh.cells).any() or inside_points:
+        return tuple(m for m in methods if m != "layout") or ("greedy rounding",)
+    return tuple(methods)
 
 
 def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
@@ -212,7 +226,9 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
     iso-line extraction (:func:`~ufl_frames.param.quantise.quantise`,
     :func:`~ufl_frames.quads.extract.extract_quads`); the first whose quads pass the
     checks (:func:`_problems`) with no scaled Jacobian under :data:`MIN_SJ` is kept, else
-    the valid one with the better worst quad (of ``methods``, in their order)."""
+    the valid one with the better worst quad (of ``methods``, in their order; the layout
+    left out where the mesh's features have interior curves or points, :func:`_methods`).
+    """
     from ufl_frames.param import measures as param_measures
     from ufl_frames.param import seamless
     from ufl_frames.quads import measures
@@ -225,7 +241,7 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
     integrated = time.perf_counter()
     failures, kept = [], None
     known = {"layout": _by_layout, "greedy rounding": _by_rounding}
-    for name, method in ((name, known[name]) for name in methods):
+    for name, method in ((name, known[name]) for name in _methods(mesh, methods)):
         begun = time.perf_counter()
         try:
             quad_mesh, record = method(mesh, seamless_map)
@@ -260,6 +276,10 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
         **record, fallback_reason=failures[0] if failures else None,
         cancelled_singularities=mesh.cancelled,
         extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj", "sj_at_least_0_8")},
+        features=None if mesh.features is None else dict(
+            regions=int(np.unique(quad_mesh.quad_region).size),
+            curve_edges=int(len(quad_mesh.curve_edges)),
+            point_nodes=int(len(quad_mesh.point_nodes))),
         seconds={"integrate": integrated - start, "quantise": quantised})
     return quad_mesh, found
 
@@ -305,14 +325,21 @@ def _improved(quad_mesh):
     from ufl_frames.quads.improve import improve_worst_quads
 
     before = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
-    return replace(quad_mesh, points=improve_worst_quads(quad_mesh.points,
-                                                         quad_mesh.quads)), before
+    fixed = None
+    if quad_mesh.curve_edges is not None:  # nodes on model curves and points stay
+        fixed = np.concatenate([np.ravel(quad_mesh.curve_edges), quad_mesh.point_nodes])
+    return replace(quad_mesh, points=improve_worst_quads(quad_mesh.points, quad_mesh.quads,
+                                                         fixed=fixed)), before
 
 
 def _problems(mesh, quad_mesh) -> list[str]:
     """What makes ``quad_mesh`` no mesh of the shape of the cut mesh ``mesh``: the
     independent checks (:func:`~ufl_frames.quads.measures.check_quad_mesh`), the Euler
-    characteristic, and a boundary longer than the triangles' (quads missing there)."""
+    characteristic, a boundary longer than the triangles' (quads missing there), and where
+    the mesh has features, those of the quads
+    (:func:`~ufl_frames.quads.features.feature_problems`: model points quad vertices, no
+    quad across an interface, every region's area and every curve's length, interior
+    curves included, equal to the triangles' within 0.5 %)."""
     from ufl_frames.quads import measures
 
     problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads,
@@ -326,4 +353,11 @@ def _problems(mesh, quad_mesh) -> list[str]:
     if length > bound * (1 + 1e-9):
         problems.append(f"the quads' boundary is {length / bound - 1:.2%} longer than the "
                         "shape's (quads are missing)")
+    if mesh.features is not None:
+        from ufl_frames.quads.features import feature_problems
+
+        if quad_mesh.quad_region is None:
+            problems.append("the quads do not carry the features")
+        else:
+            problems += feature_problems(quad_mesh, mesh.x, mesh.cells, mesh.features)
     return problems

@@ -42,7 +42,7 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 
 from ufl_frames.param.seamless import Parametrisation, folded
 from ufl_frames.quads.charts import UNIT, LayoutError
-from ufl_frames.quads.extract import QuadMesh
+from ufl_frames.quads.extract import QuadMesh, with_features
 from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
 from ufl_frames.quads.motorcycles import rot
 
@@ -505,4 +505,4 @@ def quads_of_map(param: Parametrisation,
     lay = layout(param)
     lay.untangled = folds
     n = integer_lengths(lay, collapse_below=collapse_below)
-    return patch_quads(lay, n), lay, n
+    return with_features(patch_quads(lay, n), param.mesh), lay, n
