@@ -28,7 +28,7 @@ def test_stage_keeps_the_interface_and_the_regions():
     x, cells, features = interface_box()
     mesh = cut.cut_mesh(x, cells, constant_field(x), features=features)
     quads, record = _quad_mesh_or_advice(mesh, 0.1)
-    assert record["quantisation"] == "greedy"  # the layout does not know interior curves
+    assert record["quantisation"] == "layout" and record["fallback_reason"] is None
     assert record["valid"] and record["problems"] == []
     assert record["features"] == {"regions": 2, "curve_edges": len(quads.curve_edges),
                                   "point_nodes": 6}
@@ -42,9 +42,10 @@ def test_stage_keeps_the_interface_and_the_regions():
 def test_stage_with_embedded_segment_and_point():
     x, cells, features = embedded_box()
     mesh = cut.cut_mesh(x, cells, constant_field(x), features=features)
-    quads, record = _quad_mesh(mesh, 0.1)
-    assert record["valid"]
-    assert np.min(np.linalg.norm(quads.points - [0.81, 0.18], axis=1)) < 1e-12
+    for methods in (("layout",), ("greedy rounding",)):
+        quads, record = _quad_mesh(mesh, 0.1, methods=methods)
+        assert record["valid"] and record["features"]["point_nodes"] == 7
+        assert np.min(np.linalg.norm(quads.points - [0.81, 0.18], axis=1)) < 1e-12
 
 
 def test_checks_refuse_quads_without_the_features():
@@ -58,10 +59,9 @@ def test_checks_refuse_quads_without_the_features():
     assert any("curve 7" in line for line in problems)
 
 
-def test_boundary_features_only_still_try_the_layout():
-    """One region, the sides split at x = 0.43 (two boundary curves meeting at 180°): no
-    interior curve, so the layout is tried; whichever method is kept, the split points are
-    quad vertices."""
+def test_a_boundary_point_at_180_degrees_is_a_layout_node():
+    """One region, the sides split at x = 0.43 (two boundary curves meeting at 180°): the
+    split points are nodes of the T-mesh, so quad vertices."""
     x, cells, full = interface_box()
     kept = full.edge_curve != 7
     features = Features(cell_region=np.ones(cells.shape[0], dtype=np.int64),
@@ -72,8 +72,7 @@ def test_boundary_features_only_still_try_the_layout():
     assert record["valid"]
     for point in ((0.43, 0.0), (0.43, 0.7)):
         assert np.min(np.linalg.norm(quads.points - point, axis=1)) < 1e-12
-    if record["quantisation"] == "greedy":
-        assert record["fallback_reason"].startswith("layout")
+    assert record["quantisation"] == "layout" and record["fallback_reason"] is None
 
 
 def test_root_field_cuts_with_its_features():

@@ -19,7 +19,7 @@ from feature_meshes import embedded_box, interface_annulus, interface_box, three
 from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, quantise, seamless
 from ufl_frames.param.features import Features
-from ufl_frames.quads import extract
+from ufl_frames.quads import extract, patches
 from ufl_frames.quads.features import curve_lengths, feature_problems, region_areas
 from ufl_frames.quads.measures import check_quad_mesh, quad_quality
 
@@ -35,10 +35,18 @@ def polar_field(x):
     return odeco.frames_to_q(np.stack([r, r], axis=1), theta)
 
 
-def quads_of(x, cells, q, features, size=0.1):
+def quads_of(x, cells, q, features, size=0.1, method="greedy"):
+    """(cut mesh, integer-grid map or None, quads) by greedy rounding or the T-mesh."""
     mesh = cut.cut_mesh(x, cells, q, features=features)
-    grid_map = quantise.quantise(mesh, seamless.scale_for_quad_size(mesh, size))
+    scale = seamless.scale_for_quad_size(mesh, size)
+    if method == "layout":
+        quads, _, _ = patches.quads_of_map(seamless.integrate(mesh, scale))
+        return mesh, None, quads
+    grid_map = quantise.quantise(mesh, scale)
     return mesh, grid_map, extract.extract_quads(grid_map)
+
+
+METHODS = pytest.mark.parametrize("method", ["greedy", "layout"])
 
 
 def distance_to_curve(x, features, tag, points):
@@ -55,9 +63,10 @@ def assert_valid(quads, area):
     assert quads.quad_region.shape == (quads.num_quads,)
 
 
-def test_interface_at_an_off_grid_place_is_a_line_of_quad_edges():
+@METHODS
+def test_interface_at_an_off_grid_place_is_a_line_of_quad_edges(method):
     x, cells, features = interface_box()
-    _, _, quads = quads_of(x, cells, constant_field(x), features)
+    _, _, quads = quads_of(x, cells, constant_field(x), features, method=method)
     assert_valid(quads, 0.7)
     p = quads.points
     on = np.abs(p[:, 0] - 0.43) < 1e-9
@@ -104,19 +113,20 @@ def test_map_is_constant_and_integer_along_the_interface():
     mesh, grid_map, _ = quads_of(x, cells, constant_field(x), features)
     edges, coordinate, tags = seamless.interior_curve_coordinates(mesh)
     assert edges.size > 0 and np.all(tags == 7)
+    f = mesh.faces[edges, 0]
+    wa, wb = ([seamless.wedge_of(mesh, int(g), int(v))
+               for g, v in zip(f, mesh.edges[edges, end], strict=True)] for end in (0, 1))
     for p in (seamless.integrate(mesh, grid_map.param.scale), grid_map.param):
-        f = mesh.faces[edges, 0]
-        wa = [seamless.wedge_of(mesh, int(g), int(v)) for g, v in zip(f, mesh.edges[edges, 0])]
-        wb = [seamless.wedge_of(mesh, int(g), int(v)) for g, v in zip(f, mesh.edges[edges, 1])]
         np.testing.assert_allclose(p.uv[wa, coordinate], p.uv[wb, coordinate], atol=1e-9)
     value = grid_map.param.uv[wa, coordinate]
     assert np.abs(value - np.rint(value)).max() < 1e-6
     assert "curve" in grid_map.kinds and "point" in grid_map.kinds
 
 
-def test_three_regions_meet_at_a_t_junction():
+@METHODS
+def test_three_regions_meet_at_a_t_junction(method):
     x, cells, features = three_region_box()
-    _, _, quads = quads_of(x, cells, constant_field(x), features)
+    _, _, quads = quads_of(x, cells, constant_field(x), features, method=method)
     assert_valid(quads, 0.7)
     p = quads.points
     for tag, coordinate, level in ((8, 0, 0.43), (9, 0, 0.43), (10, 1, 0.33)):
@@ -141,9 +151,10 @@ def test_three_regions_meet_at_a_t_junction():
     assert feature_problems(quads, x, cells, features) == []
 
 
-def test_embedded_segment_and_point():
+@METHODS
+def test_embedded_segment_and_point(method):
     x, cells, features = embedded_box()
-    _, _, quads = quads_of(x, cells, constant_field(x), features)
+    _, _, quads = quads_of(x, cells, constant_field(x), features, method=method)
     assert_valid(quads, 0.7)
     p = quads.points
     segment = quads.curve_edges[quads.edge_curve == 5]
@@ -168,9 +179,10 @@ def test_embedded_segment_and_point():
     assert feature_problems(quads, x, cells, features) == []
 
 
-def test_annulus_with_a_circular_interface():
+@METHODS
+def test_annulus_with_a_circular_interface(method):
     x, cells, features = interface_annulus()
-    _, _, quads = quads_of(x, cells, polar_field(x), features)
+    _, _, quads = quads_of(x, cells, polar_field(x), features, method=method)
     p = quads.points
     e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
     area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
@@ -197,7 +209,8 @@ def test_annulus_with_a_circular_interface():
     assert feature_problems(quads, x, cells, features) == []
 
 
-def test_a_point_between_two_boundary_curves_is_a_quad_vertex():
+@METHODS
+def test_a_point_between_two_boundary_curves_is_a_quad_vertex(method):
     """One region, the bottom side split at x = 0.43 (two curves meeting at 180°): the
     split is a quad vertex, though no interface reaches it."""
     x, cells, full = interface_box()
@@ -205,7 +218,7 @@ def test_a_point_between_two_boundary_curves_is_a_quad_vertex():
     features = Features(cell_region=np.ones(cells.shape[0], dtype=np.int64),
                         curve_edges=full.curve_edges[kept], edge_curve=full.edge_curve[kept],
                         point_nodes=full.point_nodes, point_tag=full.point_tag)
-    _, _, quads = quads_of(x, cells, constant_field(x), features)
+    _, _, quads = quads_of(x, cells, constant_field(x), features, method=method)
     assert_valid(quads, 0.7)
     for point in ((0.43, 0.0), (0.43, 0.7)):
         assert np.min(np.linalg.norm(quads.points - point, axis=1)) < 1e-12

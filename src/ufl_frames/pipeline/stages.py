@@ -197,26 +197,12 @@ def _quad_mesh_or_advice(mesh, size: float):
         failure = str(e)
     for share in SMALLER_SIZES:
         try:
-            _quad_mesh(mesh, share * size, methods=_methods(mesh, ("layout",)))
+            _quad_mesh(mesh, share * size, methods=("layout",))
         except ValueError:
             continue
         raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
     raise ValueError(f"{failure} (quad sizes {', '.join(f'{f * size:.3g}' for f in SMALLER_SIZES)} "
                      "fail too)")
-
-
-def _methods(mesh, methods):
-    """``methods`` without the layout where the cut mesh's features have interior curves
-    or model points off the boundary: its T-mesh does not know them yet (greedy rounding
-    makes them integer iso-lines and grid points, :mod:`~ufl_frames.param.quantise`)."""
-    features = mesh.features
-    if features is None:
-        return tuple(methods)
-    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
-    inside_points = np.setdiff1d(np.asarray(features.point_nodes), boundary).size > 0
-    if features.interior_curve_edges(mesh.cells).any() or inside_points:
-        return tuple(m for m in methods if m != "layout") or ("greedy rounding",)
-    return tuple(methods)
 
 
 def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
@@ -226,8 +212,9 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
     iso-line extraction (:func:`~ufl_frames.param.quantise.quantise`,
     :func:`~ufl_frames.quads.extract.extract_quads`); the first whose quads pass the
     checks (:func:`_problems`) with no scaled Jacobian under :data:`MIN_SJ` is kept, else
-    the valid one with the better worst quad (of ``methods``, in their order; the layout
-    left out where the mesh's features have interior curves or points, :func:`_methods`).
+    the valid one with the better worst quad (of ``methods``, in their order). Both keep
+    the cut mesh's features: interior curves are arcs of the T-mesh and integer iso-lines of
+    the rounded map, model points its nodes and grid points (checked by :func:`_problems`).
     """
     from ufl_frames.param import measures as param_measures
     from ufl_frames.param import seamless
@@ -241,7 +228,7 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
     integrated = time.perf_counter()
     failures, kept = [], None
     known = {"layout": _by_layout, "greedy rounding": _by_rounding}
-    for name, method in ((name, known[name]) for name in _methods(mesh, methods)):
+    for name, method in ((name, known[name]) for name in methods):
         begun = time.perf_counter()
         try:
             quad_mesh, record = method(mesh, seamless_map)

@@ -9,9 +9,10 @@ the quads were made:
 
 * a quad's region is that of the triangle under its centre;
 * a quad edge lies on a curve where the middle of its traced chain (the iso-line under it,
-  :attr:`~ufl_frames.quads.extract.QuadMesh.chains`; the straight edge where there is none,
-  then both ends too) is on one of the curve's triangle edges, to a 10⁻⁹ share of the
-  mesh's diameter;
+  :attr:`~ufl_frames.quads.extract.QuadMesh.chains`) is on one of the curve's triangle
+  edges, to a 10⁻⁹ share of the mesh's diameter; where there are no chains (the T-mesh's
+  quads), where both its ends are on the curve to that share and its middle within
+  :data:`ALONG` of its length (a chord along the curve, not across it);
 * a model point's quad vertex is the one at its place, to that share.
 
 :func:`feature_problems` checks the result against the triangles: every model point a
@@ -96,9 +97,9 @@ def _polyline_middle(polyline) -> np.ndarray:
     return polyline[i] + t * (polyline[i + 1] - polyline[i])
 
 
-def _on_curve(x, curve_edges, p, tol):
+def _on_curve(x, curve_edges, p, tol, within=None):
     """The curve edge (index into ``curve_edges``) that each point of ``p`` lies on
-    within ``tol`` (−1 for none)."""
+    within ``tol`` (or within ``within`` (k,) per point; −1 for none)."""
     if curve_edges.shape[0] == 0 or p.shape[0] == 0:
         return np.full(p.shape[0], -1, dtype=np.int64)
     a, b = x[curve_edges[:, 0]], x[curve_edges[:, 1]]
@@ -112,7 +113,30 @@ def _on_curve(x, curve_edges, p, tol):
     distance = np.linalg.norm(w - t[..., None] * d, axis=2)
     best = distance.argmin(axis=1)
     found = near[np.arange(p.shape[0]), best]
-    return np.where(distance[np.arange(p.shape[0]), best] <= tol, found, -1)
+    limit = tol if within is None else np.maximum(within, tol)
+    return np.where(distance[np.arange(p.shape[0]), best] <= limit, found, -1)
+
+
+#: A straight quad edge (no chain under it) with both ends on a curve lies along it where
+#: its middle is closer to the curve than this share of its length (the sagitta of a
+#: chord of a circle is under a tenth of the chord up to a 45° arc).
+ALONG = 0.25
+
+
+def _straight_on_curve(x, curve_edges, edge_curve, points, edges, tol):
+    """Per quad edge (straight, no chain) a curve edge of the curve it lies along (−1 for
+    none): both its ends on that curve within ``tol``, its middle within :data:`ALONG` of
+    its length."""
+    out = np.full(edges.shape[0], -1, dtype=np.int64)
+    length = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
+    middle = 0.5 * (points[edges[:, 0]] + points[edges[:, 1]])
+    for tag in np.unique(edge_curve):
+        mine = np.flatnonzero(edge_curve == tag)
+        ends = [_on_curve(x, curve_edges[mine], points[edges[:, k]], tol) for k in (0, 1)]
+        near = _on_curve(x, curve_edges[mine], middle, 0.0, within=ALONG * length)
+        found = (ends[0] >= 0) & (ends[1] >= 0) & (near >= 0) & (out < 0)
+        out[found] = mine[near[found]]
+    return out
 
 
 def quad_features(quad_mesh, x, cells, features: Features):
@@ -135,13 +159,10 @@ def quad_features(quad_mesh, x, cells, features: Features):
                        for i, j in edges]).reshape(-1, 2)
     curve_edges = np.asarray(features.curve_edges, dtype=np.int64).reshape(-1, 2)
     edge_curve = np.asarray(features.edge_curve, dtype=np.int64)
-    on = _on_curve(x, curve_edges, middle, tol)
-    if not chains and edges.size:  # straight edges: their ends on the same curve too
-        for end in (0, 1):
-            at = _on_curve(x, curve_edges, points[edges[:, end]], tol)
-            same = (at >= 0) & (on >= 0)
-            same[same] = edge_curve[at[same]] == edge_curve[on[same]]
-            on = np.where(same, on, -1)
+    if chains or not edges.size:
+        on = _on_curve(x, curve_edges, middle, tol)
+    else:  # straight edges: both ends on one curve, the middle near it (not across)
+        on = _straight_on_curve(x, curve_edges, edge_curve, points, edges, tol)
     kept = on >= 0
     point_nodes, point_tag = [], []
     if len(features.point_nodes):

@@ -112,6 +112,12 @@ def integer_lengths(lay: Layout, weights=None,
     L = lay.lengths()
     w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
     lower = np.where(L < collapse_below, 0.0, 1.0)
+    # the features' curves and the arcs at their model points keep a length: a collapse
+    # would glue two of them
+    model = {k for k, key in enumerate(lay.nodes)
+             if key[0] == "v" and key[1] in lay.motorcycles.model_nodes}
+    lower[[a for a, arc in enumerate(lay.arcs)
+           if arc.curve or arc.start in model or arc.end in model]] = 1.0
     for _ in range(L.size + 1):
         n = _solve(lay, lower, w)
         points = _Points(lay, n)
