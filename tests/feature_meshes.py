@@ -179,3 +179,24 @@ def interface_annulus(r0=0.5, ri=0.71, r1=1.0, nt=48, h=0.05, seed=3):
     curves = [(k + 1, on) for k, on in enumerate(circles)]
     points = [(k + 1, (s, 0.0)) for k, s in enumerate((r0, ri, r1))]
     return x, cells, features_of(x, cells, region, curves, points)
+
+
+def embedded_corner_box(corner=(0.64, 0.37), start=0.25, top=0.58, width=1.0, height=0.7,
+                        h=0.05, seed=4):
+    """The box (one region, 1) with an embedded curve that turns by 90° inside: from
+    (start, y) to the corner (x, y) (curve 5), then up to (x, top) (curve 6), both ends and
+    the corner model points. Returns (x, cells, features)."""
+    cx, cy = corner
+    xs = pieces(*sorted({0.0, start, cx, width}), h=h)
+    ys = pieces(*sorted({0.0, cy, top, height}), h=h)
+    x, cells = tensor_mesh(xs, ys)
+    X, Y = x[:, 0], x[:, 1]
+    across = _near(Y, cy) & (X >= start - 1e-12) & (X <= cx + 1e-12)
+    up = _near(X, cx) & (Y >= cy - 1e-12) & (Y <= top + 1e-12)
+    boundary = _near(X, 0) | _near(X, width) | _near(Y, 0) | _near(Y, height)
+    x = perturb(x, across | up | boundary, 0.2 * h, seed)
+    curves, points = _box_boundary(x, width, height)
+    curves += [(5, across), (6, up)]
+    points += [(5, (start, cy)), (6, (cx, cy)), (7, (cx, top))]
+    region = np.ones(cells.shape[0], dtype=np.int64)
+    return x, cells, features_of(x, cells, region, curves, points)

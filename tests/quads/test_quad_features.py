@@ -14,7 +14,13 @@ curve is a circle: both are its chords) within 0.5 %, the model points quad vert
 
 import numpy as np
 import pytest
-from feature_meshes import embedded_box, interface_annulus, interface_box, three_region_box
+from feature_meshes import (
+    embedded_box,
+    embedded_corner_box,
+    interface_annulus,
+    interface_box,
+    three_region_box,
+)
 
 from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, quantise, seamless
@@ -176,6 +182,24 @@ def test_embedded_segment_and_point(method):
     assert np.all(quads.quad_region == 1)
     tags = dict(zip(quads.point_tag.tolist(), quads.point_nodes.tolist(), strict=True))
     np.testing.assert_allclose(p[tags[7]], (0.81, 0.18), atol=1e-12)
+    assert feature_problems(quads, x, cells, features) == []
+
+
+@METHODS
+def test_embedded_curve_turning_inside(method):
+    """An embedded curve along y = 0.37 from x = 0.25 to the corner (0.64, 0.37), then up
+    to y = 0.58: both legs lines of quad edges, the corner and the ends quad vertices."""
+    x, cells, features = embedded_corner_box()
+    _, _, quads = quads_of(x, cells, constant_field(x), features, method=method)
+    assert_valid(quads, 0.7)
+    p = quads.points
+    for tag, coordinate, level, length in ((5, 1, 0.37, 0.39), (6, 0, 0.64, 0.21)):
+        e = quads.curve_edges[quads.edge_curve == tag]
+        assert e.size and np.abs(p[e.ravel(), coordinate] - level).max() < 1e-9
+        assert np.linalg.norm(p[e[:, 1]] - p[e[:, 0]], axis=1).sum() == pytest.approx(
+            length, rel=1e-9)
+    for point in ((0.25, 0.37), (0.64, 0.37), (0.64, 0.58)):
+        assert np.min(np.linalg.norm(p - point, axis=1)) < 1e-12
     assert feature_problems(quads, x, cells, features) == []
 
 

@@ -152,14 +152,16 @@ def quad_features(quad_mesh, x, cells, features: Features):
     region = np.asarray(features.cell_region)
     inside = locate(x, cells, points[quads].mean(axis=1))
     quad_region = np.where(inside >= 0, region[np.maximum(inside, 0)], -1)
-    edges = _quad_edges(quads)
-    chains = quad_mesh.chains or {}
-    middle = np.array([_polyline_middle(np.asarray(chains[(int(i), int(j))]))
-                       if (int(i), int(j)) in chains else 0.5 * (points[i] + points[j])
-                       for i, j in edges]).reshape(-1, 2)
     curve_edges = np.asarray(features.curve_edges, dtype=np.int64).reshape(-1, 2)
     edge_curve = np.asarray(features.edge_curve, dtype=np.int64)
-    if chains or not edges.size:
+    edges = _quad_edges(quads)
+    on_some = _on_curve(x, curve_edges, points, tol) >= 0
+    edges = edges[on_some[edges].all(axis=1)]  # only these can lie along a curve
+    chains = quad_mesh.chains or {}
+    if chains:
+        middle = np.array([_polyline_middle(np.asarray(chains[(int(i), int(j))]))
+                           if (int(i), int(j)) in chains else 0.5 * (points[i] + points[j])
+                           for i, j in edges]).reshape(-1, 2)
         on = _on_curve(x, curve_edges, middle, tol)
     else:  # straight edges: both ends on one curve, the middle near it (not across)
         on = _straight_on_curve(x, curve_edges, edge_curve, points, edges, tol)
