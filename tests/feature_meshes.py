@@ -92,7 +92,7 @@ def _box_boundary(x, width, height, xsplits=(), ysplits=()):
         tag += 1
     curves.append((tag, _near(X, 0)))  # left
     corners = [(u, 0.0) for u in xs] + [(width, v) for v in ys[1:]] \
-        + [(u, height) for u in xs[:-1]] + [(0.0, v) for v in ys[1:-1]]
+        + [(u, height) for u in xs[:-1]]
     points = [(k + 1, p) for k, p in enumerate(dict.fromkeys(corners))]
     return curves, points
 

@@ -114,21 +114,6 @@ def test_the_check_finds_an_interface_the_quads_ignore():
     assert any("straddles" in line for line in problems)
 
 
-def test_map_is_constant_and_integer_along_the_interface():
-    x, cells, features = interface_box()
-    mesh, grid_map, _ = quads_of(x, cells, constant_field(x), features)
-    edges, coordinate, tags = seamless.interior_curve_coordinates(mesh)
-    assert edges.size > 0 and np.all(tags == 7)
-    f = mesh.faces[edges, 0]
-    wa, wb = ([seamless.wedge_of(mesh, int(g), int(v))
-               for g, v in zip(f, mesh.edges[edges, end], strict=True)] for end in (0, 1))
-    for p in (seamless.integrate(mesh, grid_map.param.scale), grid_map.param):
-        np.testing.assert_allclose(p.uv[wa, coordinate], p.uv[wb, coordinate], atol=1e-9)
-    value = grid_map.param.uv[wa, coordinate]
-    assert np.abs(value - np.rint(value)).max() < 1e-6
-    assert "curve" in grid_map.kinds and "point" in grid_map.kinds
-
-
 @METHODS
 def test_three_regions_meet_at_a_t_junction(method):
     x, cells, features = three_region_box()

@@ -486,9 +486,15 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
 
     Returns:
         The :class:`CutMesh`, with the combed frames and the field's vertex angles.
+
+    Raises:
+        ValueError: the features do not give one region per triangle.
     """
     x = np.asarray(x, dtype=np.float64)[:, :2]
     cells = np.asarray(cells, dtype=np.int64)
+    if features is not None and np.shape(features.cell_region) != (cells.shape[0],):
+        raise ValueError(f"the features give {np.size(features.cell_region)} regions for "
+                         f"{cells.shape[0]} triangles")
     e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
     clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
     cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)

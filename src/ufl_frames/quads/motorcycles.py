@@ -6,7 +6,11 @@ From every singular vertex one trace along each of its 4 − turn axis direction
 its fan, a half-open sector rule per triangle), from every boundary vertex whose fan spans
 270° or more one along each axis direction strictly inside the fan (the continuations of
 its boundary curves), and from one vertex of every boundary loop that nothing else touches
-one across it. Each trace is a straight axis-parallel line in the exact charts of
+one across it. Before all of them, the interior curves of the mesh's features
+(interfaces, embedded curves: iso-lines of the map) are laid down as traces along their
+edges, split at their nodes (model points, ends, junctions), and every node inside the
+domain that would leave a face no rectangle (a curve's end, a turn, an embedded point)
+launches the traces that continue it (:meth:`Motorcycles.curves`). Each trace is a straight axis-parallel line in the exact charts of
 :func:`~ufl_frames.quads.charts.fixed_point`, followed triangle by triangle in exact
 rational arithmetic (a line through a vertex goes on into the fan sector that contains its
 direction; across a seam point and direction turn with the transition), and stops at the
@@ -139,7 +143,9 @@ class Motorcycles:
         self.taken = set()  # separatrix slots (vertex, triangle, direction) already used
         self.slots = {}  # vertex -> its slots (triangle, direction) counter-clockwise
         self.curve_vertices = set()  # vertices on the features' interior curves: traces stop
-        self.model_nodes = set(int(v) for v in model_points(mesh))  # must be layout nodes
+        used = np.zeros(n, dtype=bool)
+        used[cells.ravel()] = True
+        self.model_nodes = {int(v) for v in model_points(mesh) if used[v]}  # layout nodes
 
     # ---- fans -------------------------------------------------------------------------
     def cross_edge(self, f, i, p, d):
