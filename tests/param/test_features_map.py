@@ -5,8 +5,9 @@ Truth: a constant frame field (angle 0) on a box split at x = 0.43 and on a box 
 regions: the interface x = 0.43 is crossed by the first branch, so U is the coordinate
 constant along it. A field that turns inside the regions (aligned on the sides and the
 interface, not a gradient): without the features its map's U varies along the interface,
-with them it is constant (to round-off), and integer once quantised; the model points the quantisation makes grid
-points are the geometry's: the corners, the interface's ends, the T-junction.
+with them it is constant (to round-off), and integer once quantised; the model points
+the quantisation makes grid points are the geometry's: the corners, the interface's ends,
+the T-junction.
 """
 
 import numpy as np

@@ -10,7 +10,8 @@ one across it. Before all of them, the interior curves of the mesh's features
 (interfaces, embedded curves: iso-lines of the map) are laid down as traces along their
 edges, split at their nodes (model points, ends, junctions), and every node inside the
 domain that would leave a face no rectangle (a curve's end, a turn, an embedded point)
-launches the traces that continue it (:meth:`Motorcycles.curves`). Each trace is a straight axis-parallel line in the exact charts of
+launches the traces that continue it (:meth:`Motorcycles.curves`). Each trace is a
+straight axis-parallel line in the exact charts of
 :func:`~ufl_frames.quads.charts.fixed_point`, followed triangle by triangle in exact
 rational arithmetic (a line through a vertex goes on into the fan sector that contains its
 direction; across a seam point and direction turn with the transition), and stops at the
