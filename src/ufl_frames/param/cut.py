@@ -28,6 +28,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from ufl_frames.frames2d import odeco
+from ufl_frames.param.features import Features
 
 __all__ = ["CutMesh", "cancel_pairs", "comb", "cut_graph", "cut_mesh", "face_frames", "matchings",
            "singular_vertices", "triangle_components", "wedges"]
@@ -438,7 +439,8 @@ class CutMesh:
     frame per triangle (labels turned by ``r``); ``edges``/``faces`` the edge table;
     ``cut`` the cut edge ids, ``jump`` per edge; ``corners`` (m, 3) the cut-mesh vertex of
     each corner; ``singular`` the singular vertices and their turns; ``paths`` the number
-    of cut paths.
+    of cut paths; ``features`` the geometry's model entities on the mesh (regions, curves,
+    points: :class:`~ufl_frames.param.features.Features`), None for a bare mesh.
     """
 
     x: np.ndarray
@@ -456,6 +458,7 @@ class CutMesh:
     paths: int
     cancelled: int = 0
     vertex_angle: np.ndarray | None = None
+    features: Features | None = None
 
     @property
     def num_wedges(self) -> int:
@@ -467,22 +470,31 @@ class CutMesh:
         return float(np.linalg.norm(self.x[e[:, 1]] - self.x[e[:, 0]], axis=1).sum())
 
 
-def cut_mesh(x, cells, q, cancel_within: float | None = None) -> CutMesh:
+def cut_mesh(x, cells, q, cancel_within: float | None = None,
+             features: Features | None = None) -> CutMesh:
     """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``;
     with ``cancel_within``, opposite singular vertices closer than that are cancelled
-    (:func:`cancel_pairs`).
+    (:func:`cancel_pairs`); ``features`` kept on the record (the map's interior curves and
+    model points, :mod:`~ufl_frames.param.seamless` and :mod:`~ufl_frames.param.quantise`).
 
     Args:
         x: vertex coordinates (n, 2 or 3); only x and y are used.
         cells: triangles (m, 3), either orientation (turned counter-clockwise here).
         q: the P1 frame field's coefficients (n, 5).
         cancel_within: the distance of :func:`cancel_pairs` (None or 0: nothing cancelled).
+        features: the geometry's regions, curves and points on this mesh, or None.
 
     Returns:
         The :class:`CutMesh`, with the combed frames and the field's vertex angles.
+
+    Raises:
+        ValueError: the features do not give one region per triangle.
     """
     x = np.asarray(x, dtype=np.float64)[:, :2]
     cells = np.asarray(cells, dtype=np.int64)
+    if features is not None and np.shape(features.cell_region) != (cells.shape[0],):
+        raise ValueError(f"the features give {np.size(features.cell_region)} regions for "
+                         f"{cells.shape[0]} triangles")
     e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
     clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
     cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
@@ -502,4 +514,5 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None) -> CutMesh:
     return CutMesh(x=x, cells=cells, angle=angle, l1=l1, l2=l2, edges=edges, faces=faces,
                    cut=cut, jump=jump, corners=corners, singular=singular, turns=turns,
                    paths=paths, cancelled=cancelled,
-                   vertex_angle=odeco.q_to_frames(np.asarray(q, dtype=np.float64))[1])
+                   vertex_angle=odeco.q_to_frames(np.asarray(q, dtype=np.float64))[1],
+                   features=features)

@@ -5,7 +5,11 @@ seen from every side of every seam and fits the boundary. So, on top of the seam
 constraints (:mod:`~ufl_frames.param.seamless`), these quantities become integers:
 
 * the translation t of every seam, (U, V)_g = Rot^j (U, V)_f + t;
-* the constant coordinate of every boundary curve (U = i or V = j along it);
+* the constant coordinate of every boundary curve (U = i or V = j along it), and of every
+  interior curve of the mesh's features (interfaces, embedded curves) alike;
+* both coordinates of every model point of the features (corners, curve ends, embedded
+  points, points between two curves) and of every vertex where curves meet or end
+  (:func:`model_points`): quad vertices, so that no quad edge straddles two curves;
 * both coordinates of every singular vertex (it becomes a grid vertex of valence 4 − turns)
   and of every boundary cusp (a boundary turning back by 180°: :func:`cusps`).
 
@@ -36,13 +40,16 @@ from ufl_frames.param.seamless import (
     Parametrisation,
     SeamlessSystem,
     boundary_coordinates,
+    curve_edge_ids,
     first_wedges,
+    interior_curve_coordinates,
     invalid,
     quarter_turn,
     wedge_of,
 )
 
-__all__ = ["IntegerGridMap", "QuantisationError", "integer_functionals", "quantise"]
+__all__ = ["IntegerGridMap", "QuantisationError", "integer_functionals", "model_points",
+           "quantise"]
 
 #: A functional is determined by those fixed when its conditional variance falls below
 #: this share of its own (it then equals an integer combination of integers).
@@ -58,7 +65,7 @@ INTEGER_TOLERANCE = 1e-6
 #: The order of rounding. Singular vertices first: a seam's translation around a singular
 #: vertex s of turn j is t = (1 − Rot^j) s, and det(1 − Rot) = 2, so an integer t alone
 #: would leave s at half-integers; an integer s makes t integer by itself.
-_PHASE = {"singular": 0, "boundary": 1, "seam": 2}
+_PHASE = {"singular": 0, "boundary": 1, "curve": 1, "point": 1, "seam": 2}
 
 
 class QuantisationError(ValueError):
@@ -145,9 +152,29 @@ def cusps(mesh: CutMesh) -> np.ndarray:
     return boundary[(angle < np.pi / 4) | (angle > 7 * np.pi / 4)]
 
 
+def model_points(mesh: CutMesh) -> np.ndarray:
+    """The vertices that must be quad vertices because of the features (empty without):
+    the model points, and every vertex on the model curves (boundary and interior) where
+    two curve tags meet or where the curve edges at it are not two (a curve's end inside,
+    a junction of three)."""
+    if mesh.features is None:
+        return np.zeros(0, dtype=np.int64)
+    points = [np.asarray(mesh.features.point_nodes, dtype=np.int64)]
+    ids, tags = curve_edge_ids(mesh)
+    if ids.size:
+        ends = mesh.edges[ids].ravel()
+        both = np.repeat(tags, 2)
+        degree = np.bincount(ends, minlength=mesh.x.shape[0])
+        pairs = np.unique(np.stack([ends, both], axis=1), axis=0)
+        kinds = np.bincount(pairs[:, 0], minlength=mesh.x.shape[0])
+        points.append(np.flatnonzero((degree > 0) & ((degree != 2) | (kinds > 1))))
+    return np.unique(np.concatenate(points))
+
+
 def integer_functionals(mesh: CutMesh) -> tuple[sp.csr_matrix, np.ndarray]:
     """F (K, 2W): the rows of every quantity that must be an integer, and their kinds
-    ('boundary', 'singular', 'seam'). Unknown 2w + c is coordinate c of wedge w."""
+    ('boundary', 'curve', 'point', 'singular', 'seam'). Unknown 2w + c is coordinate c of
+    wedge w."""
     rows, cols, vals, kinds = [], [], [], []
 
     def add(entries, kind):
@@ -166,6 +193,19 @@ def integer_functionals(mesh: CutMesh) -> tuple[sp.csr_matrix, np.ndarray]:
         w = wedge_of(mesh, face, int(v))
         for c in range(2):
             add([(2 * w + c, 1.0)], "boundary")
+    inner, inner_coordinate, _ = interior_curve_coordinates(mesh)
+    for e, c in zip(inner, inner_coordinate, strict=True):
+        w = wedge_of(mesh, int(mesh.faces[e, 0]), int(mesh.edges[e, 0]))
+        add([(2 * w + int(c), 1.0)], "curve")
+    used = np.zeros(mesh.x.shape[0], dtype=bool)
+    used[mesh.cells.ravel()] = True
+    for v in model_points(mesh):
+        if not used[v]:
+            continue
+        face = int(np.flatnonzero(np.any(mesh.cells == v, axis=1))[0])
+        w = wedge_of(mesh, face, int(v))
+        for c in range(2):
+            add([(2 * w + c, 1.0)], "point")
     for v in mesh.singular:
         face = int(np.flatnonzero(np.any(mesh.cells == v, axis=1))[0])
         w = wedge_of(mesh, face, int(v))

@@ -14,7 +14,9 @@ the gradient of a map, ∇U = u/|u|², ∇V = v/|v|². So (U, V), P1 on the cut 
   translation t along each seam — imposed without t as equal differences at the two ends
   of every cut edge;
 * boundary alignment: along a boundary edge the coordinate whose branch crosses the edge
-  (the branch more normal to it) is constant;
+  (the branch more normal to it) is constant; likewise along the interior curves of the
+  mesh's features (interfaces between regions, embedded curves: one coordinate constant
+  along each piece, seen from the edge's first triangle);
 * U = V = 0 at one wedge of every connected component (the map is defined up to a
   translation of each).
 
@@ -33,7 +35,8 @@ import scipy.sparse.linalg as spla
 from ufl_frames.param.cut import CutMesh, triangle_components
 
 __all__ = ["Parametrisation", "SeamlessSystem", "angle_sums", "boundary_coordinates",
-           "elimination", "first_wedges", "folded", "gradients", "integrate", "invalid",
+           "curve_edge_ids", "elimination", "first_wedges", "folded", "gradients", "integrate",
+           "interior_curve_coordinates", "invalid",
            "least_squares_system", "miswound", "parametrisation", "quarter_turn",
            "scale_for_quad_count", "scale_for_quad_size", "targets", "wedge_of",
            "weighted_solve"]
@@ -71,16 +74,52 @@ def boundary_coordinates(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray]:
     off the boundary's direction (by up to 45° next to a singularity), decides only where
     the vertex frames are not known."""
     boundary = np.flatnonzero(mesh.faces[:, 1] < 0)
-    f = mesh.faces[boundary, 0]
+    return boundary, _constant_coordinate(mesh, boundary)
+
+
+def curve_edge_ids(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh edges (ids into ``mesh.edges``) on the model curves of ``mesh.features``
+    and the curve tag of each (empty without features).
+
+    Raises:
+        ValueError: a curve edge is no edge of the mesh.
+    """
+    if mesh.features is None or mesh.features.curve_edges.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    e = np.asarray(mesh.features.curve_edges, dtype=np.int64).reshape(-1, 2)
+    n = int(max(mesh.edges.max(initial=0), e.max(initial=0))) + 1
+    keys = mesh.edges[:, 0] * n + mesh.edges[:, 1]
+    wanted = np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1])
+    ids = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+    if np.any(keys[ids] != wanted):
+        raise ValueError(f"{int(np.count_nonzero(keys[ids] != wanted))} curve edges of the "
+                         "features are not edges of the triangle mesh")
+    return ids, np.asarray(mesh.features.edge_curve, dtype=np.int64)
+
+
+def interior_curve_coordinates(mesh: CutMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The interior curve edges (interfaces and embedded curves: two triangles), per edge
+    the coordinate (0: U, 1: V) constant along it in its first triangle's chart (chosen as
+    on the boundary, :func:`boundary_coordinates`), and its curve tag."""
+    ids, tags = curve_edge_ids(mesh)
+    inner = mesh.faces[ids, 1] >= 0
+    ids, tags = ids[inner], tags[inner]
+    return ids, _constant_coordinate(mesh, ids), tags
+
+
+def _constant_coordinate(mesh: CutMesh, edge_ids: np.ndarray) -> np.ndarray:
+    """Per edge of ``edge_ids`` the coordinate of its first triangle's combed frame whose
+    branch crosses it (see :func:`boundary_coordinates`)."""
+    f = mesh.faces[edge_ids, 0]
     angle = mesh.angle[f]
     if mesh.vertex_angle is not None:
         quarter = np.pi / 2
-        ends = mesh.vertex_angle[mesh.edges[boundary]] - angle[:, None]  # (nb, 2)
+        ends = mesh.vertex_angle[mesh.edges[edge_ids]] - angle[:, None]  # (k, 2)
         angle = angle + np.mean(np.mod(ends + quarter / 2, quarter) - quarter / 2, axis=1)
-    direction = mesh.x[mesh.edges[boundary, 1]] - mesh.x[mesh.edges[boundary, 0]]
+    direction = mesh.x[mesh.edges[edge_ids, 1]] - mesh.x[mesh.edges[edge_ids, 0]]
     along_u = np.abs(np.cos(angle) * direction[:, 0] + np.sin(angle) * direction[:, 1])
     along_v = np.abs(-np.sin(angle) * direction[:, 0] + np.cos(angle) * direction[:, 1])
-    return boundary, np.where(along_u < along_v, 0, 1)
+    return np.where(along_u < along_v, 0, 1).astype(np.int64)
 
 
 def wedge_of(mesh: CutMesh, face: int, vertex: int) -> int:
@@ -147,7 +186,9 @@ def _constraints(mesh: CutMesh, anchor=None) -> list[dict]:
                     add(2 * wf_b + d, rot[c, d])
             rows.append(row)
     boundary, coordinate = boundary_coordinates(mesh)
-    for e, c in zip(boundary, coordinate, strict=True):
+    inner, inner_coordinate, _ = interior_curve_coordinates(mesh)
+    for e, c in zip(np.concatenate([boundary, inner]),
+                    np.concatenate([coordinate, inner_coordinate]), strict=True):
         f = int(faces[e, 0])
         a, b = int(edges[e, 0]), int(edges[e, 1])
         rows.append({2 * wedge(f, a) + c: 1.0, 2 * wedge(f, b) + c: -1.0})

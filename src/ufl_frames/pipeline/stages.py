@@ -70,7 +70,7 @@ class RootField:
         from ufl_frames.param import cut
 
         if self._cut is None:
-            self._cut = cut.cut_mesh(*self._arrays)
+            self._cut = cut.cut_mesh(*self._arrays, features=getattr(self, "features", None))
         return self._cut
 
     def on_root(self, work, failure: str):
@@ -212,7 +212,10 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
     iso-line extraction (:func:`~ufl_frames.param.quantise.quantise`,
     :func:`~ufl_frames.quads.extract.extract_quads`); the first whose quads pass the
     checks (:func:`_problems`) with no scaled Jacobian under :data:`MIN_SJ` is kept, else
-    the valid one with the better worst quad (of ``methods``, in their order)."""
+    the valid one with the better worst quad (of ``methods``, in their order). Both keep
+    the cut mesh's features: interior curves are arcs of the T-mesh and integer iso-lines of
+    the rounded map, model points its nodes and grid points (checked by :func:`_problems`).
+    """
     from ufl_frames.param import measures as param_measures
     from ufl_frames.param import seamless
     from ufl_frames.quads import measures
@@ -260,6 +263,10 @@ def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
         **record, fallback_reason=failures[0] if failures else None,
         cancelled_singularities=mesh.cancelled,
         extracted={key: as_extracted[key] for key in ("min_sj", "mean_sj", "sj_at_least_0_8")},
+        features=None if mesh.features is None else dict(
+            regions=int(np.unique(quad_mesh.quad_region).size),
+            curve_edges=int(len(quad_mesh.curve_edges)),
+            point_nodes=int(len(quad_mesh.point_nodes))),
         seconds={"integrate": integrated - start, "quantise": quantised})
     return quad_mesh, found
 
@@ -305,14 +312,21 @@ def _improved(quad_mesh):
     from ufl_frames.quads.improve import improve_worst_quads
 
     before = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
-    return replace(quad_mesh, points=improve_worst_quads(quad_mesh.points,
-                                                         quad_mesh.quads)), before
+    fixed = None
+    if quad_mesh.curve_edges is not None:  # nodes on model curves and points stay
+        fixed = np.concatenate([np.ravel(quad_mesh.curve_edges), quad_mesh.point_nodes])
+    return replace(quad_mesh, points=improve_worst_quads(quad_mesh.points, quad_mesh.quads,
+                                                         fixed=fixed)), before
 
 
 def _problems(mesh, quad_mesh) -> list[str]:
     """What makes ``quad_mesh`` no mesh of the shape of the cut mesh ``mesh``: the
     independent checks (:func:`~ufl_frames.quads.measures.check_quad_mesh`), the Euler
-    characteristic, and a boundary longer than the triangles' (quads missing there)."""
+    characteristic, a boundary longer than the triangles' (quads missing there), and where
+    the mesh has features, those of the quads
+    (:func:`~ufl_frames.quads.features.feature_problems`: model points quad vertices, no
+    quad across an interface, every region's area and every curve's length, interior
+    curves included, equal to the triangles' within 0.5 %)."""
     from ufl_frames.quads import measures
 
     problems = measures.check_quad_mesh(quad_mesh.points, quad_mesh.quads,
@@ -326,4 +340,11 @@ def _problems(mesh, quad_mesh) -> list[str]:
     if length > bound * (1 + 1e-9):
         problems.append(f"the quads' boundary is {length / bound - 1:.2%} longer than the "
                         "shape's (quads are missing)")
+    if mesh.features is not None:
+        from ufl_frames.quads.features import feature_problems
+
+        if quad_mesh.quad_region is None:
+            problems.append("the quads do not carry the features")
+        else:
+            problems += feature_problems(quad_mesh, mesh.x, mesh.cells, mesh.features)
     return problems

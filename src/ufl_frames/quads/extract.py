@@ -37,7 +37,7 @@ from ufl_frames.param.quantise import IntegerGridMap
 from ufl_frames.param.seamless import quarter_turn, wedge_of
 from ufl_frames.quads.isolines import UNIT, lines
 
-__all__ = ["ExtractionError", "QuadMesh", "extract_quads", "fixed_point"]
+__all__ = ["ExtractionError", "QuadMesh", "extract_quads", "fixed_point", "with_features"]
 
 
 class ExtractionError(RuntimeError):
@@ -48,12 +48,21 @@ class ExtractionError(RuntimeError):
 class QuadMesh:
     """A quad mesh: ``points`` (n, 2), ``quads`` (m, 4) counter-clockwise; ``chains`` the
     polyline (k, 2) under every quad edge (the traced iso-line, for pictures), keyed by the
-    sorted point pair; ``boundary`` the boundary edges (b, 2)."""
+    sorted point pair; ``boundary`` the boundary edges (b, 2). Where the triangles had
+    :class:`~ufl_frames.param.features.Features` (:func:`with_features`; None without):
+    ``quad_region`` (m,) the region of every quad, ``curve_edges`` (k, 2) the quad edges
+    on model curves (boundary and interior) with their curve ``edge_curve`` (k,), and
+    ``point_nodes`` the quad vertices at model points with their ``point_tag``."""
 
     points: np.ndarray
     quads: np.ndarray
     chains: dict
     boundary: np.ndarray
+    quad_region: np.ndarray | None = None
+    curve_edges: np.ndarray | None = None
+    edge_curve: np.ndarray | None = None
+    point_nodes: np.ndarray | None = None
+    point_tag: np.ndarray | None = None
 
     @property
     def num_quads(self) -> int:
@@ -115,7 +124,18 @@ def extract_quads(grid_map: IntegerGridMap) -> QuadMesh:
     if np.any(det <= 0):
         raise ExtractionError(f"{int(np.count_nonzero(det <= 0))} triangles fold or collapse "
                               "in the integer-grid map")
-    return _faces(*lines(mesh, C))
+    return with_features(_faces(*lines(mesh, C)), mesh)
+
+
+def with_features(quad_mesh: QuadMesh, mesh) -> QuadMesh:
+    """``quad_mesh`` with the model entities of the cut mesh ``mesh``'s features found on
+    it (:func:`~ufl_frames.quads.features.quad_features`); unchanged where ``mesh`` has
+    none."""
+    if getattr(mesh, "features", None) is None:
+        return quad_mesh
+    from ufl_frames.quads.features import quad_features
+
+    return quad_features(quad_mesh, mesh.x, mesh.cells, mesh.features)
 
 
 def _faces(points_all, is_grid, lo, hi, direction, exterior_p, exterior_q) -> QuadMesh:

@@ -21,18 +21,21 @@ __all__ = ["improve_worst_quads"]
 WORST_SJ = 0.8
 
 
-def improve_worst_quads(points, quads, sweeps: int = 3, searches: int = 12) -> np.ndarray:
+def improve_worst_quads(points, quads, sweeps: int = 3, searches: int = 12,
+                        fixed=None) -> np.ndarray:
     """The points with every interior vertex of a quad with SJ < :data:`WORST_SJ` moved,
     one at a time, to raise the smallest SJ of its quads (a pattern search: 8 directions,
     the step halved when none helps, starting at a quarter of its mean edge); boundary
     vertices stay. A move is taken only if it raises that local minimum, so no quad
-    around a moved vertex ends worse than the worst one there before.
+    around a moved vertex ends worse than the worst one there before. The ``fixed``
+    points (indices: on model curves, at model points) stay too.
 
     Args:
         points: the points (n, 2); not modified.
         quads: point indices (m, 4), counter-clockwise.
         sweeps: passes over the bad vertices at most (fewer when none is left).
         searches: pattern-search steps per vertex and sweep.
+        fixed: point indices that must not move, or None.
 
     Returns:
         The moved points (n, 2), a new array.
@@ -44,6 +47,8 @@ def improve_worst_quads(points, quads, sweeps: int = 3, searches: int = 12) -> n
     edges, counts = np.unique(pairs, axis=0, return_counts=True)
     boundary = np.zeros(n, dtype=bool)
     boundary[edges[counts == 1].ravel()] = True
+    if fixed is not None:
+        boundary[np.asarray(fixed, dtype=np.int64)] = True
     around = [[] for _ in range(n)]
     for k, quad in enumerate(quads):
         for v in quad:

@@ -32,7 +32,12 @@ from fractions import Fraction
 
 import numpy as np
 
-from ufl_frames.param.seamless import Parametrisation, parametrisation, quarter_turn
+from ufl_frames.param.seamless import (
+    Parametrisation,
+    curve_edge_ids,
+    parametrisation,
+    quarter_turn,
+)
 from ufl_frames.quads.charts import UNIT, LayoutError
 from ufl_frames.quads.motorcycles import QUARTER, Motorcycles, rot
 
@@ -43,13 +48,15 @@ __all__ = ["Arc", "Layout", "layout", "piece_length", "untangle"]
 class Arc:
     """A graph edge of the layout: ``pieces`` (triangle, start, end, direction) along it
     in the triangles' charts, its end nodes, its length in the map, whether it is a piece
-    of the boundary (then the domain is on its left)."""
+    of the boundary (then the domain is on its left), whether a piece of an interior curve
+    of the features."""
 
     pieces: list
     start: int
     end: int
     length: float
     boundary: bool
+    curve: bool = False
 
 
 @dataclass
@@ -146,8 +153,13 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
         keys = [t.start] + [positions[s] for s in cuts] + [t.end]
         for k, pieces in enumerate(_cut_pieces(t.pieces, cuts)):
             arcs.append(Arc(pieces, node(keys[k]), node(keys[k + 1]),
-                            float(sum(piece_length(p) for p in pieces)) / UNIT, False))
-    # boundary arcs: the loops split at corners and where traces start or end
+                            float(sum(piece_length(p) for p in pieces)) / UNIT, False,
+                            t.stop == "curve"))
+    # boundary arcs: the loops split at corners, at the features' model points and where
+    # traces start or end
+    for w in sorted(mc.model_nodes):
+        if mc.on_boundary[w]:
+            node(("v", w))
     ends_on = defaultdict(list)
     for key in node_id:
         if key[0] == "e":
@@ -345,6 +357,9 @@ def untangle(param: Parametrisation, rounds: int = 200, rings: int = 3):
         region[cells[region[cells].any(axis=1)].ravel()] = True
     region &= ~mc.on_boundary
     region[mesh.singular] = False
+    curves, _ = curve_edge_ids(mesh)  # the features' curves and points stay: iso-lines
+    region[mesh.edges[curves].ravel()] = False
+    region[list(mc.model_nodes)] = False
     # per vertex: (its wedge, the other two corners' wedges, rotation to the fan's first)
     fans = [(v, [(int(corners[f, loc]), int(corners[f, (loc + 1) % 3]),
                   int(corners[f, (loc + 2) % 3]), quarter_turn(kappa))

@@ -6,7 +6,12 @@ From every singular vertex one trace along each of its 4 − turn axis direction
 its fan, a half-open sector rule per triangle), from every boundary vertex whose fan spans
 270° or more one along each axis direction strictly inside the fan (the continuations of
 its boundary curves), and from one vertex of every boundary loop that nothing else touches
-one across it. Each trace is a straight axis-parallel line in the exact charts of
+one across it. Before all of them, the interior curves of the mesh's features
+(interfaces, embedded curves: iso-lines of the map) are laid down as traces along their
+edges, split at their nodes (model points, ends, junctions), and every node inside the
+domain that would leave a face no rectangle (a curve's end, a turn, an embedded point)
+launches the traces that continue it (:meth:`Motorcycles.curves`). Each trace is a
+straight axis-parallel line in the exact charts of
 :func:`~ufl_frames.quads.charts.fixed_point`, followed triangle by triangle in exact
 rational arithmetic (a line through a vertex goes on into the fan sector that contains its
 direction; across a seam point and direction turn with the transition), and stops at the
@@ -29,7 +34,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from ufl_frames.param.seamless import Parametrisation
+from ufl_frames.param.quantise import model_points
+from ufl_frames.param.seamless import Parametrisation, curve_edge_ids
 from ufl_frames.quads.charts import LayoutError, fixed_point
 
 __all__ = ["AXES", "QUARTER", "Motorcycles", "Trace", "rot"]
@@ -137,6 +143,10 @@ class Motorcycles:
         self.traces: list[Trace] = []
         self.taken = set()  # separatrix slots (vertex, triangle, direction) already used
         self.slots = {}  # vertex -> its slots (triangle, direction) counter-clockwise
+        self.curve_vertices = set()  # vertices on the features' interior curves: traces stop
+        used = np.zeros(n, dtype=bool)
+        used[cells.ravel()] = True
+        self.model_nodes = {int(v) for v in model_points(mesh) if used[v]}  # layout nodes
 
     # ---- fans -------------------------------------------------------------------------
     def cross_edge(self, f, i, p, d):
@@ -386,7 +396,8 @@ class Motorcycles:
                 f, p, d, _ = self.cross_edge(f, exit_edge, q, d)
                 continue
             w = self.cells[f][vertex]
-            if w in self.singular or self.on_boundary[w] or self.visited[w]:
+            if (w in self.singular or self.on_boundary[w] or self.visited[w]
+                    or w in self.curve_vertices):
                 tr.stop = "singular" if w in self.singular else (
                     "boundary" if self.on_boundary[w] else "trace")
                 tr.end = ("v", w)
@@ -426,8 +437,10 @@ class Motorcycles:
             loc = self.cells[g].index(w)
 
     def run(self, extra_loops=True):
-        """Trace every separatrix, then every concave corner's continuations, then one
-        line across every boundary loop no trace touches. Returns the traces."""
+        """Lay the features' interior curves down as traces (:meth:`curves`), trace every
+        separatrix, then every concave corner's continuations, then one line across every
+        boundary loop no trace touches. Returns the traces."""
+        self.curves()
         for w in sorted(self.singular):
             slots = self.vertex_slots(w)
             if len(slots) != 4 - self.singular[w]:
@@ -453,6 +466,93 @@ class Motorcycles:
                 for f, d in self.vertex_slots(w):
                     self.trace(f, self.pts[f][self.cells[f].index(w)], d, ("v", w))
         return self.traces
+
+    def curves(self):
+        """The interior curves of the mesh's features (interfaces, embedded curves) as
+        traces that were there first: every run of curve edges between two nodes (model
+        points, ends, junctions, the boundary) one trace along the edges, which later
+        traces stop on; then, from every node inside the domain, traces that keep its
+        faces rectangles: the continuation of a curve that ends there, of both curves at
+        a turn, and a line through an embedded point (two opposite directions)."""
+        ids, _ = curve_edge_ids(self.mesh)
+        if ids.size == 0 and not self.model_nodes:
+            return
+        inner = ids[self.mesh.faces[ids, 1] >= 0]
+        edges = self.mesh.edges[inner]
+        neighbours = defaultdict(list)
+        for (a, b), e in zip(edges.tolist(), inner.tolist(), strict=True):
+            neighbours[a].append((b, e))
+            neighbours[b].append((a, e))
+        nodes = {w for w in neighbours if len(neighbours[w]) != 2 or self.on_boundary[w]
+                 or w in self.model_nodes or w in self.singular}
+        used = set()
+        leaving = defaultdict(list)  # node -> (triangle, direction) of the curves leaving it
+        starts = sorted(nodes) + sorted(neighbours)  # closed loops: any vertex of theirs
+        for w in starts:
+            for b, e in neighbours[w]:
+                if e in used:
+                    continue
+                nodes.add(w)
+                chain = [w]
+                while True:
+                    used.add(e)
+                    chain.append(b)
+                    if b in nodes:
+                        break
+                    b, e = next(item for item in neighbours[b] if item[1] not in used)
+                self._curve_trace(chain, leaving)
+        for w in sorted(nodes | (self.model_nodes - set(np.flatnonzero(self.on_boundary)))):
+            if self.on_boundary[w] or w in self.singular:
+                continue
+            self._fill(w, leaving[w])
+
+    def _curve_trace(self, chain, leaving):
+        """A trace along the vertices ``chain`` (a run of curve edges), registered."""
+        tid = len(self.traces)
+        tr = Trace(start=("v", chain[0]), end=("v", chain[-1]), stop="curve")
+        self.traces.append(tr)
+        for a, b in zip(chain[:-1], chain[1:], strict=True):
+            f = next(g for g in self.vertex_faces[a] if b in self.cells[g])
+            p0, p1 = tuple(self.pts[f][self.cells[f].index(a)]), \
+                tuple(self.pts[f][self.cells[f].index(b)])
+            if p0[0] != p1[0] and p0[1] != p1[1]:
+                raise LayoutError(f"an interior curve is not an iso-line of the map (edge "
+                                  f"{a}–{b})")
+            d = (int(np.sign(p1[0] - p0[0])), int(np.sign(p1[1] - p0[1])))
+            tr.pieces.append((f, p0, p1, d))
+            self.register(tid, len(tr.pieces) - 1, f, p0, p1, d)
+            if b != chain[-1]:
+                self.visited[b].append((tid, len(tr.pieces) - 1))
+                self.curve_vertices.add(b)
+        self.curve_vertices.update((chain[0], chain[-1]))
+        f0, _, _, d0 = tr.pieces[0]
+        f1, _, _, d1 = tr.pieces[-1]
+        leaving[chain[0]].append((f0, d0))
+        leaving[chain[-1]].append((f1, (-d1[0], -d1[1])))
+
+    def _fill(self, w, leaving):
+        """Traces from the inside node w so that the curves leaving it (``leaving``,
+        (triangle, direction)) and they leave no gap of more than a half turn: none at a
+        straight run or a junction of three, the continuation at an end, both at a turn,
+        two opposite at an embedded point."""
+        fan = {f: kappa for f, _, kappa in self.fan(w)}
+        slots = self.vertex_slots(w)
+        if len(slots) != 4:
+            raise LayoutError(f"a model vertex {w} has {len(slots)} axis directions in its "
+                              "fan (the map folds around it)")
+        quarter = [QUARTER[rot(fan[f], d)] for f, d in slots]
+        taken = {QUARTER[rot(fan[f], d)] for f, d in leaving}
+        if not taken:
+            wanted = {quarter[0], (quarter[0] + 2) % 4}
+        elif len(taken) == 1:
+            wanted = {(q + 2) % 4 for q in taken}
+        elif len(taken) == 2 and (max(taken) - min(taken)) % 2 == 1:
+            wanted = {(q + 2) % 4 for q in taken}
+        else:
+            wanted = set()
+        for (f, d), q in zip(slots, quarter, strict=True):
+            if q in wanted:
+                self.trace(f, self.pts[f][self.cells[f].index(w)], d, ("v", w))
 
     def _is_node(self, w):
         return self.quarters(w) != 2 or any(

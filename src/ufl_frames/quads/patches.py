@@ -42,7 +42,7 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 
 from ufl_frames.param.seamless import Parametrisation, folded
 from ufl_frames.quads.charts import UNIT, LayoutError
-from ufl_frames.quads.extract import QuadMesh
+from ufl_frames.quads.extract import QuadMesh, with_features
 from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
 from ufl_frames.quads.motorcycles import rot
 
@@ -112,6 +112,12 @@ def integer_lengths(lay: Layout, weights=None,
     L = lay.lengths()
     w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
     lower = np.where(L < collapse_below, 0.0, 1.0)
+    # the features' curves and the arcs at their model points keep a length: a collapse
+    # would glue two of them
+    model = {k for k, key in enumerate(lay.nodes)
+             if key[0] == "v" and key[1] in lay.motorcycles.model_nodes}
+    lower[[a for a, arc in enumerate(lay.arcs)
+           if arc.curve or arc.start in model or arc.end in model]] = 1.0
     for _ in range(L.size + 1):
         n = _solve(lay, lower, w)
         points = _Points(lay, n)
@@ -505,4 +511,4 @@ def quads_of_map(param: Parametrisation,
     lay = layout(param)
     lay.untangled = folds
     n = integer_lengths(lay, collapse_below=collapse_below)
-    return patch_quads(lay, n), lay, n
+    return with_features(patch_quads(lay, n), param.mesh), lay, n
