@@ -168,7 +168,7 @@ def test_regions_read_back_by_dolfinx(tmp_path):
     if comm.rank == 0:
         _write(path)
     comm.Barrier()
-    shared = dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.shared_facet)
+    shared = dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.shared_facet, 2)
     data = dolfinx.io.gmsh.read_from_msh(path, comm, 0, gdim=2, partitioner=shared)
     mesh = data.mesh
     assert mesh.topology.cell_name() == "quadrilateral"
