@@ -15,7 +15,9 @@ Which curve a node lies on comes from the quad mesh's curve edges where it has t
 without them, every boundary node of the quads goes to the closest of the model's
 boundary curves, and the boundary node closest to each model point on the boundary goes
 onto the point if it lies within :data:`POINT_SNAP` of the boundary's mean edge length of
-it. A ``.msh`` has no CAD model: its nodes stay where they are (said in the record's
+it (a corner of the geometry, which the quads keep as a vertex; a point where two curves
+meet smoothly, a fillet's end, is no quad vertex in general, and its nearest node stays on
+its curve). A ``.msh`` has no CAD model: its nodes stay where they are (said in the record's
 ``note``). A move that would invert a quad or make it degenerate (a scaled Jacobian ≤ 0)
 is refused: the node keeps its old position, and the refusals are counted.
 
@@ -42,8 +44,8 @@ from ufl_frames.quads.msh import mesh_boundary_edges  # noqa: E402
 __all__ = ["CadSnap", "POINT_SNAP", "snap_to_cad"]
 
 #: Without point nodes, a boundary node goes onto a model point only within this share of
-#: the boundary's mean edge length of it.
-POINT_SNAP = 0.25
+#: the boundary's mean edge length of it: a quad vertex made at the point, up to rounding.
+POINT_SNAP = 1e-6
 
 
 @dataclass(frozen=True)
