@@ -722,7 +722,8 @@ class _Solve:
         if self.param is not None:
             names += files.write_param(staging, self.param, label, comm)
         if self.quads is not None:
-            names += files.write_quads(staging, self.quads, label, comm)
+            names += files.write_quads(staging, self.quads, label, comm,
+                                       groups=self.field.domain.physical_groups)
         return [*names, "summary.json"]
 
     def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:
