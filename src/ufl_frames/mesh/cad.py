@@ -183,8 +183,7 @@ def _targets(source: str, x: np.ndarray, asked: dict):
     _rebuild(source)
     if "boundary" in asked:
         return _nearest_targets(x, asked["boundary"], asked["tolerance"])
-    nodes, tags = [], []
-    targets = []
+    nodes, targets = [], []
     point_nodes, point_tags = asked["points"]
     known = {tag for _, tag in gmsh.model.getEntities(0)}
     for node, tag in zip(point_nodes.tolist(), point_tags.tolist(), strict=True):
