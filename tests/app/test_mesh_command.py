@@ -109,7 +109,26 @@ def test_read_back_by_dolfinx_with_the_disk_area(disk_run):
     assert length == pytest.approx(2 * math.pi * RADIUS, rel=5e-3)
 
 
-def test_quad_count(tmp_path_factory):
+def piano_distance(x):
+    """Distance of the points (k, 2) to the piano's outline (ufl_frames.mesh.builtin):
+    four segments and two quarter circles."""
+    from ufl_frames.mesh.builtin import piano_points
+
+    p = np.array(piano_points())
+    distance = np.full(len(x), np.inf)
+    for a, b in ((0, 1), (1, 2), (3, 4), (5, 0)):
+        t = np.clip((x - p[a]) @ (p[b] - p[a]) / np.sum((p[b] - p[a]) ** 2), 0, 1)
+        distance = np.minimum(distance, np.linalg.norm(x - p[a] - t[:, None] * (p[b] - p[a]),
+                                                       axis=1))
+    for centre, radius, quadrant in ((p[6], 0.6, (-1, -1)), (p[7], 0.8, (-1, 1))):
+        d = x - centre
+        inside = (np.sign(d[:, 0]) == quadrant[0]) & (np.sign(d[:, 1]) == quadrant[1])
+        on_arc = np.abs(np.linalg.norm(d, axis=1) - radius)
+        distance = np.where(inside, np.minimum(distance, on_arc), distance)
+    return distance
+
+
+def test_quad_count_and_nodes_on_the_piano_arcs(tmp_path_factory):
     root = Path(COMM.bcast(str(tmp_path_factory.mktemp("count")), root=0))
     asked = 150
     assert cli.main(["mesh", "piano", "--quads", str(asked), "--out", str(root / "o"),
@@ -118,6 +137,12 @@ def test_quad_count(tmp_path_factory):
     # quads of size sqrt(area / N): about N of them (their edges are not all that size)
     assert found["quad_size"] == pytest.approx(math.sqrt(found["area"] / asked), rel=0.01)
     assert 0.7 * asked < found["quads"] < 1.3 * asked
+    # a filleted shape: the nodes on its arcs were chords' ends, now on the arcs
+    diameter = math.hypot(2.0, 1.2)
+    assert found["cad"]["max_offset_before"] > 1e-5 * diameter
+    if COMM.rank == 0:
+        x, boundary = msh_nodes(root / "o" / "quads.msh")
+        assert piano_distance(x[boundary]).max() < 1e-9 * diameter
 
 
 @pytest.mark.parametrize("args", [
