@@ -91,16 +91,34 @@ def test_nodes_onto_the_circles_and_points(geo, named):
     assert check_quad_mesh(snap.points, q) == []
 
 
-def test_a_move_that_inverts_a_quad_is_refused(geo):
+def test_a_move_to_another_curve_is_refused(geo):
     x, q, edges, curves, point_nodes, point_tag = polar_quads()
     wrong = curves.copy()
-    wrong[0] = 5  # an outer edge named as on the inner circle: its nodes would cross the ring
+    wrong[0] = 5  # an outer edge named as on the inner circle: its node would cross the ring
     snap = snap_to_cad(str(geo), x, q, curve_edges=edges, edge_curve=wrong,
                        point_nodes=point_nodes, point_tag=point_tag, time_limit=60.0)
     outer_node = edges[0, 1]  # its first node is point 2's, placed on the point anyway
     assert snap.refused == 1
     assert np.array_equal(snap.points[outer_node], x[outer_node])
     assert snap.max_offset_after == pytest.approx(0.5, abs=2 * SAGITTA)
+    assert check_quad_mesh(snap.points, q) == []
+
+
+def test_a_move_that_inverts_a_quad_is_refused(geo):
+    """The outer ring of quads lies outside the circle, 1e-4 thick: every outer node's move
+    onto the circle (2e-4 inwards) would turn its quads inside out."""
+    x, q, edges, curves, point_nodes, point_tag = polar_quads()
+    r = np.linalg.norm(x, axis=1)
+    outer, ring = np.isclose(r, 1.0, atol=3 * SAGITTA), np.isclose(r, 1.0 - 0.5 / NR)
+    x[outer] *= ((1 + 2 * SAGITTA) / r[outer])[:, None]
+    x[ring] *= ((1 + SAGITTA) / r[ring])[:, None]
+    assert check_quad_mesh(x, q) == []
+    snap = snap_to_cad(str(geo), x, q, curve_edges=edges, edge_curve=curves,
+                       point_nodes=point_nodes, point_tag=point_tag)
+    assert snap.refused == NT and snap.moved == NT  # the inner circle's nodes move
+    assert np.array_equal(snap.points[outer], x[outer])
+    # the farthest: the node that was also 2e-4 off point 2 along the circle
+    assert snap.max_offset_after == pytest.approx(math.hypot(2 * SAGITTA, 2 * SAGITTA), rel=0.02)
     assert check_quad_mesh(snap.points, q) == []
 
 

@@ -41,8 +41,11 @@ from ufl_frames.mesh.domain import GeometryError, one_line  # noqa: E402
 from ufl_frames.quads.measures import check_quad_mesh, scaled_jacobians  # noqa: E402
 from ufl_frames.quads.msh import mesh_boundary_edges  # noqa: E402
 
-__all__ = ["CadSnap", "POINT_SNAP", "snap_to_cad"]
+__all__ = ["CadSnap", "MAX_MOVE", "POINT_SNAP", "snap_to_cad"]
 
+#: A move longer than this share of the boundary's mean edge length is refused: a node on
+#: its curve moves by a chord's sagitta, far less (a longer one went to another curve).
+MAX_MOVE = 0.5
 #: Without point nodes, a boundary node goes onto a model point only within this share of
 #: the boundary's mean edge length of it: a quad vertex made at the point, up to rounding.
 POINT_SNAP = 1e-6
@@ -112,17 +115,18 @@ def snap_to_cad(source: str, points, quads, curve_edges=None, edge_curve=None,
         nodes, targets = _in_child(work, key, time_limit)
     else:
         nodes, targets = work()
-    return _apply(x, q, nodes, targets)
+    return _apply(x, q, nodes, targets, asked["longest"])
 
 
 def _asked(x, q, curve_edges, edge_curve, point_nodes, point_tag) -> dict:
     """What to project: (nodes, curve tags) and (nodes, point tags), or the boundary nodes
     and a tolerance for the model points where the mesh names neither."""
+    boundary = mesh_boundary_edges(q)
+    length = np.linalg.norm(x[boundary[:, 1]] - x[boundary[:, 0]], axis=1)
+    edge = float(length.mean()) if length.size else 0.0
     if curve_edges is None and point_nodes is None:
-        boundary = mesh_boundary_edges(q)
-        length = np.linalg.norm(x[boundary[:, 1]] - x[boundary[:, 0]], axis=1)
-        return {"boundary": np.unique(boundary),
-                "tolerance": POINT_SNAP * float(length.mean()) if length.size else 0.0}
+        return {"boundary": np.unique(boundary), "tolerance": POINT_SNAP * edge,
+                "longest": MAX_MOVE * edge}
     nodes = np.asarray([] if point_nodes is None else point_nodes, dtype=np.int64).ravel()
     tags = np.asarray([] if point_tag is None else point_tag, dtype=np.int64).ravel()
     edges = np.asarray(np.zeros((0, 2)) if curve_edges is None else curve_edges,
@@ -133,7 +137,8 @@ def _asked(x, q, curve_edges, edge_curve, point_nodes, point_tag) -> dict:
         raise ValueError("point_nodes and point_tag, curve_edges and edge_curve must match")
     on_curve, first = np.unique(edges.ravel(), return_index=True)
     keep = ~np.isin(on_curve, nodes)
-    return {"points": (nodes, tags), "curves": (on_curve[keep], curves[first][keep])}
+    return {"points": (nodes, tags), "curves": (on_curve[keep], curves[first][keep]),
+            "longest": MAX_MOVE * edge}
 
 
 def _session(work):
@@ -215,7 +220,9 @@ def _nearest_targets(x: np.ndarray, boundary: np.ndarray, tolerance: float):
     """Without curve edges: each boundary node to the closest boundary curve; the node
     closest to each model point on the boundary onto it, within ``tolerance``."""
     surfaces = gmsh.model.getEntities(2)
-    curves = sorted({abs(tag) for _, tag in gmsh.model.getBoundary(surfaces, combined=True)})
+    # every curve a surface's boundary runs along, a slit's (twice, opposite) included
+    curves = sorted({abs(tag) for _, tag in gmsh.model.getBoundary(surfaces, combined=False,
+                                                                    oriented=False)})
     if not curves or not boundary.size:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
     candidates = np.stack([_closest(c, x[boundary]) for c in curves])  # (curves, k, 2)
@@ -231,18 +238,20 @@ def _nearest_targets(x: np.ndarray, boundary: np.ndarray, tolerance: float):
     return boundary, targets
 
 
-def _apply(x: np.ndarray, q: np.ndarray, nodes: np.ndarray, targets: np.ndarray) -> CadSnap:
-    """The moves of ``nodes`` to ``targets``, but those that would invert a quad."""
+def _apply(x: np.ndarray, q: np.ndarray, nodes: np.ndarray, targets: np.ndarray,
+           longest: float) -> CadSnap:
+    """The moves of ``nodes`` to ``targets``, but those longer than ``longest`` and those
+    that would invert a quad."""
     offset = np.linalg.norm(targets - x[nodes], axis=1) if nodes.size else np.zeros(0)
     before = float(offset.max(initial=0.0))
     moving = offset > 0
     nodes, targets, offset = nodes[moving], targets[moving], offset[moving]
+    accepted = offset <= longest
     y = x.copy()
-    y[nodes] = targets
-    accepted = np.ones(nodes.size, dtype=bool)
+    y[nodes[accepted]] = targets[accepted]
     slot = np.full(x.shape[0], -1, dtype=np.int64)
     slot[nodes] = np.arange(nodes.size)
-    while True:  # in every bad quad, the longest move still kept is undone
+    while nodes.size:  # in every bad quad, the longest move still kept is undone
         corner = slot[q[scaled_jacobians(y, q) <= 0]]  # (bad, 4) move of each corner, or -1
         valid = corner >= 0
         valid[valid] = accepted[corner[valid]]
