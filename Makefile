@@ -37,9 +37,11 @@ $(STAMP_PURE): pyproject.toml
 	$(PY_PURE) -m pip install --quiet --no-deps -e .
 	@touch $(STAMP_PURE)
 
-# The main job: integrable frame field on the built-in 'piano' geometry.
+# The main job: integrable frame field on the built-in 'piano' geometry, and a quad mesh
+# of a shipped two-material geometry with named groups.
 demo: $(STAMP)
 	$(MPIRUN) -n $(NP) $(VENV)/bin/ufl-frames solve piano --out out_piano --force
+	$(MPIRUN) -n $(NP) $(VENV)/bin/ufl-frames mesh demos/two_materials.geo --out out_regions --force
 
 # The whole suite: the pure NumPy tests without DOLFINx, then serially and under MPI.
 test: test-pure test-serial test-mpi

@@ -24,6 +24,7 @@ EXPECTED_PNGS = {
         "convergence_isotropic.png", "convergence_nonisotropic.png", "checks.png",
     ],
     "demo_nested.py": ["convergence_nested.png", "convergence_cold.png", "frames_nested.png"],
+    "demo_regions.py": ["regions.png", "temperature.png"],
     "demo_param.py": ["param_annulus.png", "param_piano_mbo.png", "param_piano_optimised.png"],
     "demo_quads.py": ["quads_piano_non-isotropic.png", "quads_piano_isotropic.png",
                       "quads_piano_conformal.png"],

@@ -5,8 +5,15 @@
     ufl-frames solve GEOMETRY [--isotropic] [--mesh-size H] [--max-it N]
                               [--mesh-time-limit SECONDS] [--out DIR] [--force]
                               [--resume DIR] [-q] [PETSc options ...]
+    ufl-frames mesh GEOMETRY [--out DIR] [--quad-size S | --quads N] [--force]
+                             [--mesh-time-limit SECONDS] [-q] [PETSc options ...]
     ufl-frames info
     ufl-frames --version
+
+``mesh`` is the mesher's command: geometry in, quad mesh out (``quads.msh``,
+``quads.vtu``, ``quads.png``, ``summary.json``), with the integrable isotropic field
+(the conformal scale) and the quads' boundary nodes on the CAD curves
+(:meth:`ufl_frames.app.run.RunConfig.for_mesh`); the same errors and statuses as ``solve``.
 
 GEOMETRY is ``annulus``, ``piano`` or a ``.geo``/``.msh``/``.step``/``.brep`` file
 (:func:`ufl_frames.mesh.build`). The run is: mesh → MBO initial field
@@ -146,6 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
         "-tao_monitor -tao_max_it 50 -mbo_ksp_type cg; put them after GEOMETRY.",
     )
     _add_solve_arguments(solve)
+    _add_mesh_command(commands)
     commands.add_parser("info", help="print the versions of the libraries in use",
                         description="Print the versions of ufl_frames, DOLFINx, PETSc, "
                         "MPI, Gmsh and friends.")
@@ -222,6 +230,43 @@ def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
                        "8-30%% higher H than meshes of the same size made by Gmsh (default: "
                        "every level meshed by Gmsh)")
     solve.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+
+
+def _add_mesh_command(commands) -> None:
+    """``mesh``: geometry in, quad mesh out (:meth:`RunConfig.for_mesh`)."""
+    mesh = commands.add_parser(
+        "mesh",
+        help="make a quad mesh of a geometry (quads.msh, quads.vtu, quads.png)",
+        description="Mesh GEOMETRY with quadrilaterals: the integrable isotropic frame field "
+        "(its conformal scale), its seamless map and quads, their boundary nodes moved onto "
+        "the CAD curves; writes quads.msh (Gmsh MSH 4.1), quads.vtu, quads.png and "
+        "summary.json to the output folder.",
+    )
+    mesh.add_argument("geometry", metavar="GEOMETRY",
+                      help="'annulus', 'piano' or a .geo/.msh/.step/.stp/.brep file")
+    size = mesh.add_mutually_exclusive_group()
+    size.add_argument("--quad-size", type=_positive_float, default=None, metavar="S",
+                      help="the quads' mean edge length, in the geometry's units (also the "
+                      "triangles' size; default: about 2000 triangles, or the file's own "
+                      "sizes, and quads of their mean edge length)")
+    size.add_argument("--quads", dest="quad_count", type=_positive_int, default=None,
+                      metavar="N", help="about N quads: quad size sqrt(area / N)")
+    mesh.add_argument("--out", metavar="DIR", default=None,
+                      help="output folder (default out_<geometry stem>); must not exist "
+                      "or be empty unless --force")
+    mesh.add_argument("--force", action="store_true",
+                      help="write into an existing non-empty output folder, replacing files")
+    mesh.add_argument("--mesh-time-limit", type=_seconds, default=None, metavar="SECONDS",
+                      help="stop reading and meshing a geometry file after this many "
+                      "seconds (default 300; 'inf' for none)")
+    mesh.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+
+
+def _mesh_config(args) -> RunConfig:
+    """The :class:`RunConfig` of parsed ``mesh`` arguments."""
+    return RunConfig.for_mesh(args.geometry, quad_size=args.quad_size,
+                              quad_count=args.quad_count, out=args.out, force=args.force,
+                              mesh_time_limit=args.mesh_time_limit, quiet=args.quiet)
 
 
 def _aspect(text: str) -> float:
@@ -423,7 +468,8 @@ def main(argv: list[str] | None = None) -> int:
         args, extras = build_parser().parse_known_args(argv)
         options = split_petsc_options(extras)
         if args.command is None:
-            raise UsageError("missing command: use 'solve' or 'info' (see ufl-frames --help)")
+            raise UsageError("missing command: use 'solve', 'mesh' or 'info' (see ufl-frames "
+                             "--help)")
         if args.command == "solve" and args.resume is not None and args.out is not None \
                 and os.path.abspath(args.out) != os.path.abspath(args.resume):
             raise UsageError("--out and --resume name different folders: the resumed run "
@@ -458,7 +504,8 @@ def main(argv: list[str] | None = None) -> int:
             with options_scope(options):  # this run's options, removed afterwards
                 interrupts.activate(watch)
                 try:
-                    run(RunConfig.from_args(args), comm=comm)
+                    run(_mesh_config(args) if args.command == "mesh"
+                        else RunConfig.from_args(args), comm=comm)
                 except Exception as e:
                     watch.stage = "reporting the failure"
                     status = _report_failure(e, comm, agreement)

@@ -61,6 +61,12 @@ class RunConfig:
     quads: bool = False
     quad_size: float | None = None
     quiet: bool = False
+    #: The quads' count asked for instead of their size: quad size sqrt(area / count).
+    quad_count: int | None = None
+    #: Write the field's files (frames.*, convergence.png); ``ufl-frames mesh`` does not.
+    field_files: bool = True
+    #: Move the quads' boundary nodes onto the CAD curves (:mod:`ufl_frames.mesh.cad`).
+    on_cad: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "geometry", str(self.geometry))
@@ -68,7 +74,26 @@ class RunConfig:
     @classmethod
     def from_args(cls, args) -> "RunConfig":
         """The config of parsed ``solve`` arguments (an argparse namespace)."""
-        return cls(**{item.name: getattr(args, item.name) for item in fields(cls)})
+        return cls(**{item.name: getattr(args, item.name) for item in fields(cls)
+                      if hasattr(args, item.name)})
+
+    @classmethod
+    def for_mesh(cls, geometry, quad_size: float | None = None,
+                 quad_count: int | None = None, **options) -> "RunConfig":
+        """The config of ``ufl-frames mesh``: a mesher's defaults — the integrable
+        isotropic field (the conformal scale, one mesh), its quads, their boundary nodes on
+        the CAD curves, only the quads' files. A ``quad_size`` is also the triangles'
+        size; ``quad_count`` N gives quads of size sqrt(area / N) on the default triangles.
+
+        Args:
+            geometry: a built-in shape's name or a geometry file.
+            quad_size: the quads' mean edge length (None: the triangles').
+            quad_count: the number of quads asked for instead (None: by size).
+            options: other fields (``out``, ``force``, ``quiet``, ``mesh_time_limit``).
+        """
+        return cls(geometry=geometry, conformal=True, levels=1, quads=True,
+                   quad_size=quad_size, quad_count=quad_count, mesh_size=quad_size,
+                   field_files=False, on_cad=True, **options)
 
     @property
     def label(self) -> str:
@@ -211,6 +236,12 @@ def _check_config(config: RunConfig, petsc_options: dict) -> None:
         raise InputError(str(e)) from e
     if not (_finite_real(pin_radius) and pin_radius >= 0):
         raise InputError(f"pin radius must be a number >= 0, got {pin_radius!r}")
+    count = config.quad_count
+    if count is not None and (isinstance(count, bool) or not isinstance(count, int)
+                              or not 0 < count <= MAX_INT):
+        raise InputError(f"quad count must be a positive integer, got {count!r}")
+    if count is not None and config.quad_size is not None:
+        raise InputError("give the quads' size or their count, not both")
     if pin_radius > 0 and config.free_singularities:
         raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
                          "with --free-singularities")
@@ -573,19 +604,80 @@ class _Solve:
             interrupts.raise_if_interrupted(self.comm)
         if config.quads:
             interrupts.set_stage("the quad mesh")
-            say("quad mesh ...")
+            quad_size = self._quad_size()
+            say("quad mesh ..." if config.quad_count is None else
+                f"quad mesh ({config.quad_count} quads: size {quad_size:.3g}) ...")
             with failures("the quad mesh"):
                 try:
                     root = stages.RootField(self.field) if root is None else root
-                    self.quads = stages.quadrangulate(root, quad_size=config.quad_size)
+                    self.quads = stages.quadrangulate(root, quad_size=quad_size)
                 except ValueError as e:  # no valid integer-grid map: the same on every rank
                     raise RunError(str(e)) from e
+            if config.on_cad:
+                self._onto_cad()
             found = self.quads.quality
             say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
                 f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
                 + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
             interrupts.raise_if_interrupted(self.comm)
+
+    def _quad_size(self) -> float | None:
+        """The quad size asked for: ``quad_size``, or sqrt(area / ``quad_count``)."""
+        count = self.config.quad_count
+        if count is None:
+            return self.config.quad_size
+        import dolfinx.fem
+        import ufl
+        from mpi4py import MPI
+
+        mesh = self.field.domain.mesh
+        one = dolfinx.fem.Constant(mesh, 1.0)
+        area = self.comm.allreduce(dolfinx.fem.assemble_scalar(
+            dolfinx.fem.form(one * ufl.dx(domain=mesh))), op=MPI.SUM)
+        return math.sqrt(area / count)
+
+    def _onto_cad(self) -> None:
+        """The quads' boundary nodes onto the geometry's CAD curves, on rank 0
+        (:func:`ufl_frames.mesh.cad.snap_to_cad`); the measures again, on every rank."""
+        from dataclasses import replace
+
+        from ufl_frames.mesh.files import mesh_time_limit
+        from ufl_frames.quads.measures import quad_quality
+
+        interrupts.set_stage("the quads' nodes onto the CAD curves")
+        quads, failure, quality = self.quads, None, None
+        if self.comm.rank == 0:
+            from ufl_frames.mesh.cad import snap_to_cad
+            from ufl_frames.mesh.domain import GeometryError
+
+            mesh = quads.mesh
+            limit = self.config.mesh_time_limit
+            try:
+                snap = snap_to_cad(
+                    self.config.geometry, mesh.points, mesh.quads,
+                    **{name: getattr(mesh, name, None) for name in (
+                        "curve_edges", "edge_curve", "point_nodes", "point_tag")},
+                    time_limit=mesh_time_limit() if limit is None else limit)
+            except GeometryError as e:
+                failure = str(e)
+            else:
+                mesh = replace(mesh, points=snap.points)
+                quality = {**quads.quality, **quad_quality(mesh.points, mesh.quads),
+                           "cad": snap.record()}
+                quads = replace(quads, mesh=mesh)
+        failure = self.comm.bcast(failure, root=0)
+        if failure is not None:
+            raise RunError(f"the quads' nodes onto the CAD curves: {failure}")
+        quality = self.comm.bcast(quality, root=0)
+        self.quads = replace(quads, quality=quality)
+        cad = quality["cad"]
+        if cad["note"]:
+            self.say(f"  note: {cad['note']}")
+        else:
+            self.say(f"  {cad['moved']} boundary nodes onto the CAD curves (up to "
+                     f"{cad['max_move']:.2g} off), {cad['refused']} moves refused (they would "
+                     f"invert a quad); SJ min {quality['min_sj']:.3f}")
 
     # --- the output folder ---
 
@@ -623,11 +715,15 @@ class _Solve:
         from ufl_frames.pipeline import files
 
         label, comm = self.config.label, self.comm
-        names = files.write_field(staging, self.field, label=label, tao_type=self.tao_type)
+        names = []
+        if self.config.field_files:
+            names += files.write_field(staging, self.field, label=label,
+                                       tao_type=self.tao_type)
         if self.param is not None:
             names += files.write_param(staging, self.param, label, comm)
         if self.quads is not None:
-            names += files.write_quads(staging, self.quads, label, comm)
+            names += files.write_quads(staging, self.quads, label, comm,
+                                       groups=self.field.domain.physical_groups)
         return [*names, "summary.json"]
 
     def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:

@@ -17,6 +17,8 @@ the mesh size actually used and notes on what the loader changed.
   directions;
 * :mod:`~ufl_frames.mesh.distribute`: Gmsh on rank 0 (in a child process under a time
   limit) and the DOLFINx mesh across the ranks.
+* :mod:`~ufl_frames.mesh.cad`: a quad mesh's boundary nodes moved onto the CAD curves
+  and points of the geometry (rank 0).
 
 Gmsh runs on rank 0 only; errors are raised on every rank as :class:`GeometryError`
 with a one-line message.

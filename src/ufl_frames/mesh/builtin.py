@@ -77,14 +77,19 @@ def annulus(
         raise GeometryError(f"r_inner must be smaller than r_outer, got {r_inner} >= {r_outer}")
 
     def make(notes):
-        occ = gmsh.model.occ
-        outer = occ.addDisk(0.0, 0.0, 0.0, r_outer, r_outer)
-        inner = occ.addDisk(0.0, 0.0, 0.0, r_inner, r_inner)
-        occ.cut([(2, outer)], [(2, inner)])
-        occ.synchronize()
+        annulus_model(r_inner, r_outer)
         return mesh_model(Sizing(h, refinements=refinements), notes)
 
     return create(comm, make, "annulus", cad=True)
+
+
+def annulus_model(r_inner: float = 0.5, r_outer: float = 1.0) -> None:
+    """The annulus' CAD model (OpenCASCADE) in the current Gmsh model, not meshed."""
+    occ = gmsh.model.occ
+    outer = occ.addDisk(0.0, 0.0, 0.0, r_outer, r_outer)
+    inner = occ.addDisk(0.0, 0.0, 0.0, r_inner, r_inner)
+    occ.cut([(2, outer)], [(2, inner)])
+    occ.synchronize()
 
 
 def piano(comm: MPI.Comm, mesh_size: float = BUILTIN_MESH_SIZE, refinements: int = 0) -> Domain:
@@ -102,23 +107,28 @@ def piano(comm: MPI.Comm, mesh_size: float = BUILTIN_MESH_SIZE, refinements: int
     refinements = check_refinements(refinements)
 
     def make(notes):
-        occ = gmsh.model.occ
-        pts = [occ.addPoint(x, y, 0.0) for x, y in piano_points()]
-        p_bass, p_treble, p_cheek, p_top_right, p_top_left, p_tail, c_concave, c_convex = pts
-        curves = [
-            occ.addLine(p_bass, p_treble),  # keyboard
-            occ.addLine(p_treble, p_cheek),  # treble cheek
-            occ.addCircleArc(p_cheek, c_concave, p_top_right),  # concave bentside
-            occ.addLine(p_top_right, p_top_left),  # top
-            occ.addCircleArc(p_top_left, c_convex, p_tail),  # convex tail
-            occ.addLine(p_tail, p_bass),  # bass side
-        ]
-        loop = occ.addCurveLoop(curves)
-        occ.addPlaneSurface([loop])
-        occ.synchronize()
+        piano_model()
         return mesh_model(Sizing(h, refinements=refinements), notes)
 
     return create(comm, make, "piano", cad=True)
+
+
+def piano_model() -> None:
+    """The piano's CAD model (OpenCASCADE) in the current Gmsh model, not meshed."""
+    occ = gmsh.model.occ
+    pts = [occ.addPoint(x, y, 0.0) for x, y in piano_points()]
+    p_bass, p_treble, p_cheek, p_top_right, p_top_left, p_tail, c_concave, c_convex = pts
+    curves = [
+        occ.addLine(p_bass, p_treble),  # keyboard
+        occ.addLine(p_treble, p_cheek),  # treble cheek
+        occ.addCircleArc(p_cheek, c_concave, p_top_right),  # concave bentside
+        occ.addLine(p_top_right, p_top_left),  # top
+        occ.addCircleArc(p_top_left, c_convex, p_tail),  # convex tail
+        occ.addLine(p_tail, p_bass),  # bass side
+    ]
+    loop = occ.addCurveLoop(curves)
+    occ.addPlaneSurface([loop])
+    occ.synchronize()
 
 
 def piano_points() -> list[tuple[float, float]]:
@@ -156,3 +166,5 @@ def piano_perimeter() -> float:
 
 #: Built-in geometry names accepted by :func:`build`.
 KNOWN_GEOMETRIES = {"annulus": annulus, "piano": piano}
+#: Their CAD models with the default parameters (:mod:`ufl_frames.mesh.cad`).
+BUILTIN_MODELS = {"annulus": annulus_model, "piano": piano_model}

@@ -82,7 +82,8 @@ def write_param(out, param, label: str, comm, stem: str = "param") -> list[str]:
     return names
 
 
-def write_quads(out, quads, label: str, comm, stem: str = "quads") -> list[str]:
+def write_quads(out, quads, label: str, comm, stem: str = "quads",
+                groups=()) -> list[str]:
     """``<stem>.msh`` (Gmsh MSH 4.1), ``<stem>.vtu`` (scaled Jacobian per quad) and
     ``<stem>.png`` of a :class:`~ufl_frames.pipeline.stages.QuadMeshed` ``quads``, written
     by rank 0 of ``comm`` into the folder ``out`` (collective).
@@ -93,6 +94,10 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads") -> list[str]:
         label: the geometry's name, for the figure's title.
         comm: the field's communicator.
         stem: the files' name without suffix.
+        groups: the geometry's physical groups
+            (:attr:`ufl_frames.mesh.domain.Domain.physical_groups`), written to the
+            ``.msh`` with the model's entities where the quad mesh has them
+            (:func:`~ufl_frames.quads.msh.write_quad_msh`).
 
     Returns:
         The names written, on every rank.
@@ -104,7 +109,9 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads") -> list[str]:
     if comm.rank == 0:
         mesh, quality = quads.mesh, quads.quality
         out = Path(out)
-        write_quad_msh(out / names[0], mesh.points, mesh.quads)
+        model = {name: getattr(mesh, name, None) for name in (
+            "quad_region", "curve_edges", "edge_curve", "point_nodes", "point_tag")}
+        write_quad_msh(out / names[0], mesh.points, mesh.quads, groups=groups, **model)
         write_quad_vtu(out / names[1], mesh.points, mesh.quads,
                        {"scaled_jacobian": scaled_jacobians(mesh.points, mesh.quads)})
         title = (f"{label}: {quality['quads']} quads, {quality['irregular_vertices']} "

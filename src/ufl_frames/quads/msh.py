@@ -3,11 +3,17 @@
 A quad mesh is ``points`` (n, 2) and ``quads`` (m, 4), counter-clockwise rows of point
 indices (:mod:`ufl_frames.quads.measures`).
 
-* :func:`write_quad_msh` — MSH 4.1 through the Gmsh API: one discrete surface holding the
-  4-node quads (Gmsh type 3) and one discrete curve holding the boundary lines (type 1),
-  physical groups ``domain`` (2D, tag 1) and ``boundary`` (1D, tag 2), so that
-  ``dolfinx.io.gmsh.read_from_msh(path, comm, 0, gdim=2)`` reads a quadrilateral mesh with
-  its boundary facets tagged 2.
+* :func:`write_quad_msh` — MSH 4.1 through the Gmsh API. Without the model's entities:
+  one discrete surface holding the 4-node quads (Gmsh type 3) and one discrete curve
+  holding the boundary lines (type 1), physical groups ``domain`` (2D, tag 1) and
+  ``boundary`` (1D, tag 2), so that ``dolfinx.io.gmsh.read_from_msh(path, comm, 0,
+  gdim=2)`` reads a quadrilateral mesh with its boundary facets tagged 2. With them (a
+  region per quad, the edges on model curves, the nodes at model points): the model's
+  entities with the file's tags — a discrete surface per region with its quads, a
+  discrete curve per curve with its lines, a point entity per model point with its node
+  (a point element, type 15) — and the file's physical groups with their names and
+  numbers; without groups every element is saved (Gmsh's ``Mesh.SaveAll``), as Gmsh
+  writes a model that has none (DOLFINx reads only files with physical groups).
 * :func:`gmsh_quality` — Gmsh's own per-element quality of the quads. ``minSIGE`` is an
   independent check of :func:`~ufl_frames.quads.measures.scaled_jacobians` (the same
   number on valid linear quads); ``minSJ``, the default, is Gmsh's Jacobian ratio (min
@@ -28,14 +34,14 @@ import numpy as np
 
 from ufl_frames.quads.measures import _arrays, scaled_jacobians, vertex_valence
 
-__all__ = ["gmsh_quality", "mesh_boundary_edges", "plot_quads", "write_quad_msh",
-           "write_quad_vtu"]
+__all__ = ["entity_groups", "gmsh_quality", "mesh_boundary_edges", "plot_quads",
+           "write_quad_msh", "write_quad_vtu"]
 
 #: Physical group tags of :func:`write_quad_msh`.
 DOMAIN_TAG = 1
 BOUNDARY_TAG = 2
 #: Gmsh element types.
-GMSH_LINE, GMSH_QUAD = 1, 3
+GMSH_POINT, GMSH_LINE, GMSH_QUAD = 15, 1, 3
 #: VTK cell type of a 4-node quadrilateral.
 VTK_QUAD = 9
 
@@ -103,45 +109,180 @@ def _add_quads(gmsh, x: np.ndarray, q: np.ndarray, lines: np.ndarray) -> tuple[i
     return surface, curve
 
 
-def write_quad_msh(path, points, quads, boundary_edges=None) -> Path:
+def write_quad_msh(path, points, quads, boundary_edges=None, *, quad_region=None,
+                   curve_edges=None, edge_curve=None, point_nodes=None, point_tag=None,
+                   groups=()) -> Path:
     """Write the quad mesh as Gmsh MSH 4.1 (ASCII) to ``path`` (a ``.msh`` file).
 
-    ``boundary_edges`` (k, 2): the point pairs written as boundary lines (physical group
-    ``boundary``); None: the mesh's boundary edges (:func:`mesh_boundary_edges`); an empty
-    array: no lines and no boundary group. Node i is Gmsh node i + 1, quad j element j + 1.
+    Without ``quad_region``, ``curve_edges`` and ``point_nodes``: one surface (physical
+    group ``domain``) and the ``boundary_edges`` (k, 2) as lines of one curve (physical
+    group ``boundary``); None: the mesh's boundary edges (:func:`mesh_boundary_edges`); an
+    empty array: no lines and no boundary group.
+
+    With any of them: the model's entities (module text). ``quad_region`` None puts every
+    quad in surface 1; ``boundary_edges`` is then unused (the lines are ``curve_edges``).
+    ``groups``: records with ``dim``, ``tag``, ``name`` and ``entities`` (such as
+    :class:`ufl_frames.mesh.domain.PhysicalGroup`), written as physical groups of the
+    entities written (a group none of whose entities has elements is left out); empty:
+    no groups, every element saved. Node i is Gmsh node i + 1, quad j element j + 1, then
+    the lines in the order given, then the point elements.
 
     Args:
         path: the file to write; its suffix must be ``.msh``.
         points: the points (n, 2).
         quads: point indices (m, 4).
         boundary_edges: the boundary lines (k, 2), as above.
+        quad_region: (m,) the surface tag of every quad (tags > 0).
+        curve_edges: (k, 2) point pairs of the quad edges on model curves.
+        edge_curve: (k,) the curve tag of each (> 0).
+        point_nodes: (p,) points at model points.
+        point_tag: (p,) the model point's tag of each (> 0).
+        groups: the physical groups, as above.
 
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
 
     Raises:
-        ValueError: ``path`` is not a ``.msh``, the arrays have a wrong shape, or an
-            index lies outside the points.
+        ValueError: ``path`` is not a ``.msh``, the arrays have a wrong shape, an index
+            lies outside the points, or a tag is not positive.
     """
     path = Path(path)
     if path.suffix.lower() != ".msh":
         raise ValueError(f"write_quad_msh writes .msh files, got {str(path)!r}")
     x, q = _arrays(points, quads)
-    lines = (mesh_boundary_edges(q) if boundary_edges is None
-             else np.asarray(boundary_edges, dtype=np.int64))
-    lines = lines.reshape(-1, 2)
-    if lines.size and (lines.min() < 0 or lines.max() >= x.shape[0]):
-        raise ValueError(f"boundary edges index points outside 0..{x.shape[0] - 1}")
+    model = quad_region is not None or curve_edges is not None or point_nodes is not None
+    if model:
+        entities = _model_entities(x.shape[0], q, quad_region, curve_edges, edge_curve,
+                                   point_nodes, point_tag)
+    else:
+        lines = (mesh_boundary_edges(q) if boundary_edges is None
+                 else np.asarray(boundary_edges, dtype=np.int64))
+        lines = _indices(lines.reshape(-1, 2), x.shape[0], "boundary edges")
     with _gmsh_model(f"quads_{path.stem}") as gmsh:
-        surface, curve = _add_quads(gmsh, x, q, lines)
-        gmsh.model.addPhysicalGroup(2, [surface], DOMAIN_TAG, name="domain")
-        if curve is not None:
-            gmsh.model.addPhysicalGroup(1, [curve], BOUNDARY_TAG, name="boundary")
+        if model:
+            written = _add_model(gmsh, x, q, entities)
+            for group in groups:
+                dim, tag = int(group.dim), int(group.tag)
+                kept = [int(e) for e in group.entities if (dim, int(e)) in written]
+                if kept:
+                    gmsh.model.addPhysicalGroup(dim, kept, tag, name=str(group.name))
+            save_all = 0 if gmsh.model.getPhysicalGroups() else 1
+        else:
+            surface, curve = _add_quads(gmsh, x, q, lines)
+            gmsh.model.addPhysicalGroup(2, [surface], DOMAIN_TAG, name="domain")
+            if curve is not None:
+                gmsh.model.addPhysicalGroup(1, [curve], BOUNDARY_TAG, name="boundary")
+            save_all = 0
         gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
         gmsh.option.setNumber("Mesh.Binary", 0)
-        gmsh.option.setNumber("Mesh.SaveAll", 0)
+        gmsh.option.setNumber("Mesh.SaveAll", save_all)
         gmsh.write(str(path))
     return path
+
+
+def entity_groups(quad_region=None, edge_curve=None, point_tag=None) -> tuple:
+    """One unnamed physical group per model entity (surfaces, curves, points; group tag =
+    entity tag): for :func:`write_quad_msh` where the geometry has no groups but the file
+    must be read by a program that needs them (DOLFINx)."""
+    from types import SimpleNamespace
+
+    out = []
+    for dim, tags in ((2, quad_region), (1, edge_curve), (0, point_tag)):
+        if tags is not None:
+            out += [SimpleNamespace(dim=dim, tag=int(t), name="", entities=(int(t),))
+                    for t in np.unique(np.asarray(tags, dtype=np.int64))]
+    return tuple(out)
+
+
+def _indices(a: np.ndarray, n: int, what: str) -> np.ndarray:
+    """``a`` as int64 point indices, or ValueError if one lies outside 0..n-1."""
+    a = np.asarray(a, dtype=np.int64)
+    if a.size and (a.min() < 0 or a.max() >= n):
+        raise ValueError(f"{what} index points outside 0..{n - 1}")
+    return a
+
+
+def _tags(a, count: int, what: str) -> np.ndarray:
+    """``a`` as (count,) positive int64 entity tags, or ValueError."""
+    a = np.asarray(a, dtype=np.int64).ravel()
+    if a.shape != (count,):
+        raise ValueError(f"{what} must have shape ({count},), got {a.shape}")
+    if a.size and a.min() <= 0:
+        raise ValueError(f"{what} must be positive entity tags, got {int(a.min())}")
+    return a
+
+
+def _model_entities(n: int, q: np.ndarray, quad_region, curve_edges, edge_curve,
+                    point_nodes, point_tag) -> dict:
+    """The checked arrays of the model's entities and which entity owns every node (the
+    lowest-dimensional one it lies on: a point, else a curve, else a surface)."""
+    m = q.shape[0]
+    region = (np.ones(m, dtype=np.int64) if quad_region is None
+              else _tags(quad_region, m, "quad_region"))
+    edges = _indices(np.zeros((0, 2)) if curve_edges is None else curve_edges, n,
+                     "curve edges").reshape(-1, 2)
+    curve = _tags(np.zeros(0) if edge_curve is None else edge_curve, edges.shape[0],
+                  "edge_curve")
+    nodes = _indices(np.zeros(0) if point_nodes is None else point_nodes, n,
+                     "point nodes").ravel()
+    point = _tags(np.zeros(0) if point_tag is None else point_tag, nodes.shape[0], "point_tag")
+    owner = np.zeros((n, 2), dtype=np.int64)  # (dim, tag); dim 3: unowned yet
+    owner[:, 0] = 3
+    owner[nodes] = np.c_[np.zeros_like(point), point]
+    free = owner[edges.ravel(), 0] == 3
+    owner[edges.ravel()[free]] = np.c_[np.ones(free.sum(), dtype=np.int64),
+                                       np.repeat(curve, 2)[free]]
+    corners = q.ravel()
+    free = owner[corners, 0] == 3
+    owner[corners[free]] = np.c_[np.full(free.sum(), 2), np.repeat(region, 4)[free]]
+    # the curves bounding each surface: those with an edge of one of its quads
+    directed = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
+    key = np.sort(directed, axis=1) @ np.array([n, 1], dtype=np.int64)
+    order = np.argsort(key)
+    wanted = np.sort(edges, axis=1) @ np.array([n, 1], dtype=np.int64)
+    pos = np.minimum(np.searchsorted(key[order], wanted), max(key.size - 1, 0))
+    bounding = {}
+    for c, i, hit in zip(curve, pos, key[order][pos] == wanted, strict=True):
+        if hit:
+            bounding.setdefault(int(region[order[i] // 4]), set()).add(int(c))
+    return dict(region=region, edges=edges, curve=curve, nodes=nodes, point=point,
+                owner=owner, bounding=bounding)
+
+
+def _add_model(gmsh, x: np.ndarray, q: np.ndarray, e: dict) -> set:
+    """The entities of :func:`_model_entities` with their nodes and elements in the current
+    model; the (dim, tag) pairs written."""
+    n, m = x.shape[0], q.shape[0]
+    xyz = np.c_[x, np.zeros(n)]
+    node_tags = np.arange(1, n + 1)
+    written = set()
+    for p in np.unique(e["point"]):
+        gmsh.model.addDiscreteEntity(0, int(p))
+        written.add((0, int(p)))
+    for c in np.unique(e["curve"]):
+        ends = np.unique(e["edges"][e["curve"] == c])
+        ends = [int(t) for t in np.unique(e["point"][np.isin(e["nodes"], ends)])]
+        gmsh.model.addDiscreteEntity(1, int(c), ends)
+        written.add((1, int(c)))
+    for r in np.unique(e["region"]):
+        gmsh.model.addDiscreteEntity(2, int(r), sorted(e["bounding"].get(int(r), ())))
+        written.add((2, int(r)))
+    owner = e["owner"]
+    for dim, tag in sorted(written):
+        mine = (owner[:, 0] == dim) & (owner[:, 1] == tag)
+        if mine.any():
+            gmsh.model.mesh.addNodes(dim, tag, node_tags[mine], xyz[mine].ravel())
+    for r in np.unique(e["region"]):
+        which = np.flatnonzero(e["region"] == r)
+        gmsh.model.mesh.addElementsByType(int(r), GMSH_QUAD, which + 1, (q[which] + 1).ravel())
+    for c in np.unique(e["curve"]):
+        which = np.flatnonzero(e["curve"] == c)
+        gmsh.model.mesh.addElementsByType(int(c), GMSH_LINE, m + 1 + which,
+                                          (e["edges"][which] + 1).ravel())
+    first = m + 1 + e["edges"].shape[0]
+    for i, (node, p) in enumerate(zip(e["nodes"], e["point"], strict=True)):
+        gmsh.model.mesh.addElementsByType(int(p), GMSH_POINT, [first + i], [int(node) + 1])
+    return written
 
 
 def gmsh_quality(points, quads, measure: str = "minSJ") -> np.ndarray:
