@@ -9,7 +9,7 @@ the order of rank 0's Gmsh mesh, the same whatever the number of processes.
 
 import numpy as np
 
-__all__ = ["gather_rows", "input_node_order"]
+__all__ = ["gather_p1_field", "gather_rows", "input_node_order"]
 
 
 def input_node_order(V) -> np.ndarray:
@@ -54,3 +54,34 @@ def gather_rows(comm, rows: np.ndarray, index: np.ndarray | None = None,
     for where, part in parts:
         out[where] = part
     return out
+
+
+def gather_p1_field(q, root: int = 0):
+    """(x (n, gdim), cells (m, k), rows (n, count)) of the P1 vector field ``q`` on rank
+    ``root``, numbered by input node index (the whole mesh's; collective), (None, None,
+    None) elsewhere. Every input node is a vertex of a simplex mesh of degree 1."""
+    V = q.function_space
+    mesh = V.mesh
+    comm = mesh.comm
+    tdim = mesh.topology.dim
+    order = input_node_order(V)
+    owned_cells = mesh.topology.index_map(tdim).size_local
+    count = V.dofmap.index_map_bs
+    ids = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
+    cells = gather_rows(comm, ids[mesh.geometry.dofmaps[0][:owned_cells]], root=root)
+    from mpi4py import MPI
+
+    size = comm.allreduce(int(order.max(initial=-1)) + 1, op=MPI.MAX)
+    x = gather_rows(comm, mesh.geometry.x[:, :tdim][_row_nodes(V)], index=order, size=size,
+                    root=root)
+    rows = gather_rows(comm, q.x.array.reshape(-1, count), index=order, size=size, root=root)
+    return x, cells, rows
+
+
+def _row_nodes(V) -> np.ndarray:
+    """The geometry node of every local dof of the P1 space ``V``."""
+    geometry = V.mesh.geometry
+    index_map = V.dofmap.index_map
+    node = np.zeros(index_map.size_local + index_map.num_ghosts, dtype=np.int64)
+    node[V.dofmap.list.ravel()] = geometry.dofmaps[0].ravel()
+    return node

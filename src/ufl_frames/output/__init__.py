@@ -18,32 +18,25 @@ rank 0 writes (a full disk, a folder that went away) is raised on every rank ali
 rank 0 raises its own exception, the others :class:`WriteError` with its message.
 """
 
-from ufl_frames.output.fields import field_functions, write_field
-from ufl_frames.output.figures import (
-    FrameLayout,
-    describe_singularities,
-    frame_layout,
-    plot_convergence,
-    plot_frames,
-)
-from ufl_frames.output.folder import OutputFolder, OutputFolderBusy, is_output_name
-from ufl_frames.output.glyphs import glyph_samples
-from ufl_frames.output.report import WriteError, write_summary
-from ufl_frames.output.vtk import read_vtk
+import importlib
 
-__all__ = [
-    "FrameLayout",
-    "OutputFolder",
-    "OutputFolderBusy",
-    "WriteError",
-    "describe_singularities",
-    "field_functions",
-    "frame_layout",
-    "glyph_samples",
-    "is_output_name",
-    "plot_convergence",
-    "plot_frames",
-    "read_vtk",
-    "write_field",
-    "write_summary",
-]
+#: The public names and their modules, imported on first use (PEP 562): the ASCII VTK
+#: reader and writer (:mod:`~ufl_frames.output.vtk`) need NumPy alone.
+_EXPORTS = {
+    "field_functions": "fields", "write_field": "fields",
+    "FrameLayout": "figures", "describe_singularities": "figures", "frame_layout": "figures",
+    "plot_convergence": "figures", "plot_frames": "figures",
+    "OutputFolder": "folder", "OutputFolderBusy": "folder", "is_output_name": "folder",
+    "glyph_samples": "glyphs", "WriteError": "report", "write_summary": "report",
+    "read_vtk": "vtk", "write_vtu": "vtk",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'ufl_frames.output' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"ufl_frames.output.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value

@@ -10,7 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_vtk", "vtk_references"]
+__all__ = ["read_vtk", "vtk_references", "write_vtu"]
+
+#: VTK cell types by the number of vertices of a straight cell of each dimension.
+VTK_CELL_TYPES = {("line", 2): 3, ("triangle", 3): 5, ("quad", 4): 9, ("tetra", 4): 10}
 
 _VTK_DTYPES = {
     "Float32": np.float32, "Float64": np.float64, "Int8": np.int8, "UInt8": np.uint8,
@@ -89,3 +92,68 @@ def read_vtk(path) -> dict:
         "cell_data": {name: np.concatenate([part["cell_data"][name] for part in parts])
                       for name in parts[0]["cell_data"]},
     }
+
+
+def write_vtu(path, points, cells, cell_type: str, point_data: dict | None = None,
+              cell_data: dict | None = None) -> Path:
+    """Write one unstructured grid as an ASCII VTK XML file (``.vtu``) for ParaView.
+
+    Args:
+        path: the file to write.
+        points: the points (n, 2 or 3) (2D ones written with z = 0).
+        cells: point indices (m, k), all of one type.
+        cell_type: ``"line"``, ``"triangle"``, ``"quad"`` or ``"tetra"``.
+        point_data: arrays per point by name ((n,) or (n, c); None: none).
+        cell_data: arrays per cell by name ((m,) or (m, c); None: none).
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        ValueError: a wrong cell type, an array of a wrong shape, or an index outside the
+            points.
+    """
+    x = np.asarray(points, dtype=float)
+    c = np.asarray(cells, dtype=np.int64)
+    if c.ndim != 2 or (cell_type, c.shape[1]) not in VTK_CELL_TYPES:
+        raise ValueError(f"cells of type {cell_type!r} with shape {c.shape} cannot be written")
+    if c.size and (c.min() < 0 or c.max() >= x.shape[0]):
+        raise ValueError(f"cells index points outside 0..{x.shape[0] - 1}")
+    if x.ndim != 2 or x.shape[1] not in (2, 3):
+        raise ValueError(f"points must have shape (n, 2) or (n, 3), got {x.shape}")
+    points3 = x if x.shape[1] == 3 else np.c_[x, np.zeros(x.shape[0])]
+
+    def text(a, fmt="%.17g"):
+        return " ".join(fmt % v for v in np.asarray(a).ravel())
+
+    def arrays(data, count, where):
+        out = []
+        for name, values in (data or {}).items():
+            a = np.asarray(values, dtype=float)
+            if a.shape[:1] != (count,) or a.ndim > 2:
+                raise ValueError(f"{where} data {name!r} must have shape ({count},) or "
+                                 f"({count}, c), got {a.shape}")
+            components = 1 if a.ndim == 1 else a.shape[1]
+            out.append(f'<DataArray type="Float64" Name="{name}" '
+                       f'NumberOfComponents="{components}" format="ascii">{text(a)}</DataArray>')
+        return "".join(out)
+
+    m, k = c.shape
+    body = f"""<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
+<UnstructuredGrid><Piece NumberOfPoints="{x.shape[0]}" NumberOfCells="{m}">
+<PointData>{arrays(point_data, x.shape[0], "point")}</PointData>
+<CellData>{arrays(cell_data, m, "cell")}</CellData>
+<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">{text(points3)}</DataArray>
+</Points>
+<Cells>
+<DataArray type="Int64" Name="connectivity" format="ascii">{text(c, "%d")}</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">{text(k * np.arange(1, m + 1), "%d")}</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">{text(np.full(m, VTK_CELL_TYPES[(cell_type, k)]), "%d")}</DataArray>
+</Cells>
+</Piece></UnstructuredGrid>
+</VTKFile>
+"""
+    path = Path(path)
+    path.write_text(body)
+    return path

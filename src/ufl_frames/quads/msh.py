@@ -322,40 +322,10 @@ def write_quad_vtu(path, points, quads, cell_data: dict | None = None) -> Path:
     Raises:
         ValueError: the arrays have a wrong shape, or an index lies outside the points.
     """
+    from ufl_frames.output.vtk import write_vtu
+
     x, q = _arrays(points, quads)
-    m = q.shape[0]
-
-    def text(a, fmt="%.17g"):
-        return " ".join(fmt % v for v in np.asarray(a).ravel())
-
-    arrays = []
-    for name, values in (cell_data or {}).items():
-        a = np.asarray(values, dtype=float)
-        if a.shape[:1] != (m,) or a.ndim > 2:
-            raise ValueError(f"cell data {name!r} must have shape (m,) or (m, c) with m = {m}, "
-                             f"got {a.shape}")
-        components = 1 if a.ndim == 1 else a.shape[1]
-        arrays.append(f'<DataArray type="Float64" Name="{name}" '
-                      f'NumberOfComponents="{components}" format="ascii">{text(a)}</DataArray>')
-    points3 = np.c_[x, np.zeros(x.shape[0])]
-    offsets = text(4 * np.arange(1, m + 1), "%d")
-    body = f"""<?xml version="1.0"?>
-<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
-<UnstructuredGrid><Piece NumberOfPoints="{x.shape[0]}" NumberOfCells="{m}">
-<CellData>{"".join(arrays)}</CellData>
-<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">{text(points3)}</DataArray>
-</Points>
-<Cells>
-<DataArray type="Int64" Name="connectivity" format="ascii">{text(q, "%d")}</DataArray>
-<DataArray type="Int64" Name="offsets" format="ascii">{offsets}</DataArray>
-<DataArray type="UInt8" Name="types" format="ascii">{text(np.full(m, VTK_QUAD), "%d")}</DataArray>
-</Cells>
-</Piece></UnstructuredGrid>
-</VTKFile>
-"""
-    path = Path(path)
-    path.write_text(body)
-    return path
+    return write_vtu(path, x, q, "quad", cell_data=cell_data)
 
 
 def plot_quads(path, points, quads, title: str = "", highlight: bool = True) -> Path:

@@ -81,55 +81,114 @@ def mbo_frame_field(
     if constraints is None:
         constraints = frame_constraints(V)
     algebra = constraints.algebra
-    k = algebra.count
     q, S, row_of, bcs = _fixed_frames(V, constraints)
-    rows = q.x.array.reshape(-1, k)
+    rows = q.x.array.reshape(-1, algebra.count)
+    free = constraints.free
 
-    tau = fem.Constant(mesh, PETSc.ScalarType(1.0))
-    u, w = ufl.TrialFunction(S), ufl.TestFunction(S)
-    # Both sides divided by h²: entries O(1) whatever the domain's size, like the unit
-    # diagonal DOLFINx puts on the boundary rows (unscaled, a domain 6.5e7 wide had
-    # entries ~1e12 against those 1s, and CG + GAMG failed: KSP reason -8).
-    unit = fem.Constant(mesh, PETSc.ScalarType(1.0 / length_scales(mesh)[1] ** 2))
-    a = fem.form(unit * (u * w + tau * ufl.inner(ufl.grad(u), ufl.grad(w))) * ufl.dx)
-    previous = fem.Function(S)
-    L = fem.form(unit * previous * w * ufl.dx)
-    component = fem.Function(S)
+    def project(values):
+        values[free] = algebra.closest_unit_isotropic(values[free])
 
-    # A, rhs and the KSP are destroyed however the loop ends (a failed solve, a monitor that
-    # raises), in reverse order of creation on every rank: the destroys are collective.
-    with ExitStack() as owned:
-        A = dolfinx.fem.petsc.create_matrix(a)
-        owned.callback(A.destroy)
-        rhs = dolfinx.fem.petsc.create_vector(S)
-        owned.callback(rhs.destroy)
-        ksp = PETSc.KSP().create(mesh.comm)
-        owned.callback(ksp.destroy)
-        ksp.setOptionsPrefix(options_prefix)
-        ksp.setOperators(A)
-        defaults = {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-12}
-        with petsc_defaults(options_prefix, defaults):
-            ksp.setFromOptions()
-
-        free = constraints.free
-        for level, tau_value in enumerate(diffusion_schedule(mesh, levels)):
-            tau.value = tau_value
-            A.zeroEntries()
-            dolfinx.fem.petsc.assemble_matrix(A, a, bcs=bcs[:1])  # same rows for all five
-            A.assemble()
-            change = 0.0
-            for _ in range(sweeps):
-                before = rows.copy()
-                for j in range(k):
-                    previous.x.array[:] = before[row_of, j]
-                    _diffusion_solve(ksp, rhs, a, L, bcs[j], component, options_prefix)
-                    rows[row_of, j] = component.x.array
-                rows[free] = algebra.closest_unit_isotropic(rows[free])
-                local = float(np.abs(rows - before).max(initial=0.0))
-                change = mesh.comm.allreduce(local, op=MPI.MAX)
-            if monitor is not None:
-                monitor(level, tau_value, change)
+    with ScalarDiffusion(S, row_of, bcs, options_prefix) as diffusion:
+        run_mbo(diffusion, rows, project, diffusion_schedule(mesh, levels), sweeps, monitor)
     return q
+
+
+def run_mbo(diffusion: "ScalarDiffusion", rows: np.ndarray, project, schedule, sweeps: int,
+            monitor=None) -> None:
+    """The MBO iterations on the frame rows ``rows`` (local, owned and ghost; changed in
+    place): per diffusion time of ``schedule``, ``sweeps`` times diffuse every coefficient,
+    then ``project(rows)`` (in place) onto the frames.
+
+    Args:
+        diffusion: the scalar diffusion solver (its fixed rows stay as they are).
+        rows: the field's rows (n, count).
+        project: called as ``project(rows)`` after each diffusion.
+        schedule: the diffusion times τ.
+        sweeps: diffuse-project iterations per τ.
+        monitor: called as ``monitor(level, tau, change)`` after each level (change: the
+            largest pointwise change of the last sweep, max over ranks).
+    """
+    comm = diffusion.comm
+    for level, tau in enumerate(schedule):
+        diffusion.set_time(tau)
+        change = 0.0
+        for _ in range(sweeps):
+            before = rows.copy()
+            for j in range(rows.shape[1]):
+                rows[diffusion.row_of, j] = diffusion.solve(before[diffusion.row_of, j], j)
+            project(rows)
+            local = float(np.abs(rows - before).max(initial=0.0))
+            change = comm.allreduce(local, op=MPI.MAX)
+        if monitor is not None:
+            monitor(level, tau, change)
+
+
+class ScalarDiffusion:
+    """Implicit diffusion steps (M + τK) u = M u_prev on a scalar P1 space, one coefficient
+    of a frame field at a time, each with its own Dirichlet condition (the fixed rows), a
+    PETSc KSP with the options prefix given (default CG + GAMG, ``setFromOptions`` last).
+
+    A context manager: the matrix, vector and KSP are destroyed on leaving it, however it
+    is left (the destroys are collective, in reverse order of creation).
+    """
+
+    def __init__(self, S, row_of, bcs, options_prefix: str = "mbo_"):
+        mesh = S.mesh
+        self.comm = mesh.comm
+        self.row_of = row_of
+        self._bcs = bcs
+        self._prefix = options_prefix
+        self._tau = fem.Constant(mesh, PETSc.ScalarType(1.0))
+        u, w = ufl.TrialFunction(S), ufl.TestFunction(S)
+        # Both sides divided by h²: entries O(1) whatever the domain's size, like the unit
+        # diagonal DOLFINx puts on the boundary rows (unscaled, a domain 6.5e7 wide had
+        # entries ~1e12 against those 1s, and CG + GAMG failed: KSP reason -8).
+        unit = fem.Constant(mesh, PETSc.ScalarType(1.0 / length_scales(mesh)[1] ** 2))
+        self._a = fem.form(unit * (u * w + self._tau * ufl.inner(ufl.grad(u), ufl.grad(w)))
+                           * ufl.dx)
+        self._previous = fem.Function(S)
+        self._L = fem.form(unit * self._previous * w * ufl.dx)
+        self._component = fem.Function(S)
+        self._owned = ExitStack()
+
+    def __enter__(self):
+        owned = self._owned
+        try:
+            self._A = dolfinx.fem.petsc.create_matrix(self._a)
+            owned.callback(self._A.destroy)
+            self._rhs = dolfinx.fem.petsc.create_vector(self._component.function_space)
+            owned.callback(self._rhs.destroy)
+            self._ksp = PETSc.KSP().create(self.comm)
+            owned.callback(self._ksp.destroy)
+            self._ksp.setOptionsPrefix(self._prefix)
+            self._ksp.setOperators(self._A)
+            defaults = {"ksp_type": "cg", "pc_type": "gamg", "ksp_rtol": 1e-12}
+            with petsc_defaults(self._prefix, defaults):
+                self._ksp.setFromOptions()
+        except BaseException:
+            owned.close()
+            raise
+        return self
+
+    def __exit__(self, *exc):
+        self._owned.close()
+        return False
+
+    def set_time(self, tau: float) -> None:
+        """Assemble the operator for the diffusion time τ (the same fixed rows for every
+        coefficient: the first condition's)."""
+        self._tau.value = tau
+        self._A.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(self._A, self._a, bcs=self._bcs[:1])
+        self._A.assemble()
+
+    def solve(self, previous: np.ndarray, j: int) -> np.ndarray:
+        """Coefficient ``j`` after one step from ``previous`` (the scalar space's local
+        values)."""
+        self._previous.x.array[:] = previous
+        _diffusion_solve(self._ksp, self._rhs, self._a, self._L,
+                         self._bcs[j] if self._bcs else None, self._component, self._prefix)
+        return self._component.x.array.copy()
 
 
 def _fixed_frames(V, constraints: FrameConstraints):
@@ -173,16 +232,17 @@ def _diffusion_solve(ksp: PETSc.KSP, rhs: PETSc.Vec, a: fem.Form, L: fem.Form, b
         rhs: the right-hand side vector, overwritten.
         a: the bilinear form of A (for the lifting).
         L: the linear form of b.
-        bc: the coefficient's Dirichlet condition.
+        bc: the coefficient's Dirichlet condition (None: none).
         component: where the solution goes (ghosts updated).
         options_prefix: the KSP's prefix, for the error message.
     """
     with rhs.localForm() as local:
         local.set(0.0)
     dolfinx.fem.petsc.assemble_vector(rhs, L)
-    dolfinx.fem.petsc.apply_lifting(rhs, [a], bcs=[[bc]])
+    bcs = [] if bc is None else [bc]
+    dolfinx.fem.petsc.apply_lifting(rhs, [a], bcs=[bcs])
     rhs.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    dolfinx.fem.petsc.set_bc(rhs, [bc])
+    dolfinx.fem.petsc.set_bc(rhs, bcs)
     ksp.solve(rhs, component.x.petsc_vec)
     if ksp.getConvergedReason() < 0:
         raise RuntimeError(
