@@ -42,7 +42,7 @@ def turning_field(x, share):
 def test_constant_field_has_no_singular_edge():
     x, cells, _ = box_tets()
     q = odeco.frames_to_q(np.ones((x.shape[0], 3)), np.broadcast_to(np.eye(3), (x.shape[0], 3, 3)))
-    graph = singular.singular_graph(cells, q)
+    graph = singular.singular_graph(cells, q, x)
     assert graph.edges.shape == (0, 2) and graph.num_chains == 0
     assert graph.boundary_edges > 0
 
@@ -50,7 +50,7 @@ def test_constant_field_has_no_singular_edge():
 @pytest.mark.parametrize("share, turn", [(0.25, 1), (-0.25, 1)])
 def test_the_axis_is_the_one_singular_line(share, turn):
     x, cells, h = box_tets()
-    graph = singular.singular_graph(cells, turning_field(x, share))
+    graph = singular.singular_graph(cells, turning_field(x, share), x)
     assert len(graph.edges) > 0
     mid = x[graph.edges].mean(axis=1)
     assert np.hypot(mid[:, 0], mid[:, 1]).max() < h  # around the axis, nowhere else

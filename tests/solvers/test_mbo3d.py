@@ -26,7 +26,7 @@ def test_box_frames_are_the_axes():
     lengths, R = odeco.q_to_frames(rows)
     assert np.abs(np.abs(R).max(axis=1) - 1).max() < 1e-10
     assert np.abs(lengths - 1).max() < 1e-10
-    assert len(singular.singular_graph(cells, rows).edges) == 0
+    assert len(singular.singular_graph(cells, rows, x).edges) == 0
 
 
 def test_hollow_cylinder_frames_follow_the_polar_axes():
@@ -38,14 +38,14 @@ def test_hollow_cylinder_frames_follow_the_polar_axes():
     e_r = np.stack([x[:, 0] / r, x[:, 1] / r, np.zeros_like(r)], axis=1)
     assert (1 - np.abs(np.einsum("nij,ni->nj", R, e_r)).max(axis=1)).max() < 1e-3
     assert (1 - np.abs(R[:, 2, :]).max(axis=1)).max() < 1e-6  # one axis along z
-    assert len(singular.singular_graph(cells, rows).edges) == 0
+    assert len(singular.singular_graph(cells, rows, x).edges) == 0
 
 
 def test_ball_singular_graph_is_closed_or_ends_on_the_boundary(tmp_path_factory):
     x, cells, rows = field_on_root(volumes.ball(COMM, mesh_size=0.2))
     if COMM.rank:
         return
-    graph = singular.singular_graph(cells, rows)
+    graph = singular.singular_graph(cells, rows, x)
     assert len(graph.edges) > 0  # a boundary-aligned field on a ball must have some
     assert graph.open_ends.size == 0
     # boundary vertices are aligned with the sphere's normal

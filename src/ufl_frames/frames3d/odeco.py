@@ -255,10 +255,7 @@ def q_to_frames(q, isotropic: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Lengths (N, 3) and rotations (N, 3, 3) of the frames closest to q (isotropic ones,
     λ_1 = λ_2 = λ_3, with ``isotropic``)."""
     q = _rows(q)
-    R = initial_rotations(q)
-    R, lam = _refine(q, R)
-    if isotropic:
-        R, lam = _refine(q, R, isotropic=True)
+    R, lam = _refine(q, initial_rotations(q), isotropic=isotropic)
     return lam, R
 
 

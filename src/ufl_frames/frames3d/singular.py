@@ -69,80 +69,89 @@ def cell_rotations(cells: np.ndarray, q: np.ndarray) -> np.ndarray:
     return odeco.q_to_frames(q[cells].mean(axis=1))[1]
 
 
-def singular_graph(cells: np.ndarray, q: np.ndarray) -> SingularGraph:
+def singular_graph(cells: np.ndarray, q: np.ndarray, x: np.ndarray | None = None) -> SingularGraph:
     """The singular graph of the P1 frame field ``q`` (n, 15) on the tetrahedra ``cells``
     (m, 4).
+
+    Around every edge (a, b) the tetrahedra are ordered by orienting each one's other two
+    vertices (c, d) so that (a, b, c, d) is positive: the next one around the edge has
+    c' = d. The monodromy is the product of the matchings in that order, composed in the
+    group's multiplication table (all edges at once). Where the cycle does not close the
+    edge lies on the boundary and is not examined.
 
     Args:
         cells: vertex indices (m, 4).
         q: the frame coefficients at the vertices (n, 15).
+        x: the vertex coordinates (n, 3), to orient the cells (None: they are taken as
+            positively oriented, as :func:`orient` makes them).
 
     Returns:
         The :class:`SingularGraph`.
     """
     cells = np.asarray(cells, dtype=np.int64)
+    if x is not None:
+        cells = orient(cells, np.asarray(x, dtype=np.float64))
     R = cell_rotations(cells, np.asarray(q, dtype=np.float64))
     n = int(cells.max()) + 1
-    pairs = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
-    others = np.array([(2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1)])
-    a = cells[:, pairs[:, 0]].ravel()
-    b = cells[:, pairs[:, 1]].ravel()
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    c = cells[:, others[:, 0]].ravel()
-    d = cells[:, others[:, 1]].ravel()
-    tet = np.repeat(np.arange(cells.shape[0]), 6)
-    key = lo * n + hi
-    order = np.argsort(key, kind="stable")
-    key, lo, hi, c, d, tet = (v[order] for v in (key, lo, hi, c, d, tet))
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    ends = np.r_[starts[1:], key.size]
-    singular, turns, open_rings = [], [], 0
-    for s, e in zip(starts, ends, strict=True):
-        ring = _ring(c[s:e], d[s:e], tet[s:e])
-        if ring is None:
-            open_rings += 1
-            continue
-        G = np.eye(3)
-        for i in range(len(ring)):
-            t0, t1 = ring[i], ring[(i + 1) % len(ring)]
-            g = OCTAHEDRAL[closest_symmetry((R[t0].T @ R[t1])[None])[0]]
-            G = G @ g
-        if not np.allclose(G, np.eye(3)):
-            angle = np.arccos(np.clip((np.trace(G) - 1) / 2, -1, 1))
-            singular.append((lo[s], hi[s]))
-            turns.append(int(round(angle / (np.pi / 2))))
-    edges = np.array(singular, dtype=np.int64).reshape(-1, 2)
-    chains = _components(edges)
-    on_boundary = boundary_vertices(cells)
-    degree = np.bincount(edges.ravel(), minlength=n) if edges.size else np.zeros(n, int)
-    open_ends = np.flatnonzero((degree == 1) & ~on_boundary)
-    return SingularGraph(edges=edges, turn=np.array(turns, dtype=np.int64), chains=chains,
-                         open_ends=open_ends, boundary_edges=open_rings)
-
-
-def _ring(c, d, tets):
-    """The tetrahedra around an edge in cyclic order (each has the edge and two more
-    vertices c, d; neighbours share one of them), or None where the ring is open (an edge
-    on the boundary)."""
-    if tets.size < 3:
-        return None
-    at: dict[int, list[int]] = {}
-    for i, (ci, di) in enumerate(zip(c, d, strict=True)):
-        at.setdefault(int(ci), []).append(i)
-        at.setdefault(int(di), []).append(i)
-    if any(len(v) != 2 for v in at.values()):
-        return None
-    ring, i, came = [0], 0, int(c[0])
-    while True:
-        nxt_vertex = int(d[i]) if int(c[i]) == came else int(c[i])
-        j = at[nxt_vertex][0] if at[nxt_vertex][0] != i else at[nxt_vertex][1]
-        if j == 0:
+    m = cells.shape[0]
+    # the six edges of a positive tetrahedron (0, 1, 2, 3), each with its other two
+    # vertices in the order that keeps (a, b, c, d) positive
+    local = np.array([(0, 1, 2, 3), (0, 2, 3, 1), (0, 3, 1, 2), (1, 2, 0, 3), (1, 3, 2, 0),
+                      (2, 3, 0, 1)])
+    a, b, c, d = (cells[:, local[:, k]].ravel() for k in range(4))
+    flip = a > b  # (b, a, d, c) is as positive as (a, b, c, d)
+    a, b = np.where(flip, b, a), np.where(flip, a, b)
+    c, d = np.where(flip, d, c), np.where(flip, c, d)
+    tet = np.repeat(np.arange(m), 6)
+    edge_key = a * n + b
+    # the next incidence around the edge: the one of the same edge whose c is this d
+    key_c = edge_key * n + c
+    order = np.argsort(key_c)
+    sorted_c = key_c[order]
+    wanted = edge_key * n + d
+    pos = np.minimum(np.searchsorted(sorted_c, wanted), order.size - 1)
+    nxt = np.where(sorted_c[pos] == wanted, order[pos], -1)
+    edges, first = np.unique(edge_key, return_index=True)
+    match = np.full(nxt.size, -1, dtype=np.int64)
+    ok = nxt >= 0
+    match[ok] = closest_symmetry(np.einsum("nji,njk->nik", R[tet[ok]], R[tet[nxt[ok]]]))
+    G = np.zeros(first.size, dtype=np.int64)  # the identity
+    cur = first.copy()
+    closed = np.zeros(first.size, dtype=bool)
+    open_ring = np.zeros(first.size, dtype=bool)
+    for _ in range(m + 1):
+        idx = np.flatnonzero(~(closed | open_ring))
+        if idx.size == 0:
             break
-        ring.append(j)
-        i, came = j, nxt_vertex
-        if len(ring) > tets.size:
-            return None
-    return [int(tets[k]) for k in ring] if len(ring) == tets.size else None
+        step = match[cur[idx]]
+        open_ring[idx[step < 0]] = True
+        idx, step = idx[step >= 0], step[step >= 0]
+        G[idx] = _PRODUCT[G[idx], step]
+        cur[idx] = nxt[cur[idx]]
+        closed[idx] = cur[idx] == first[idx]
+    singular_edge = closed & (G != 0)
+    pairs = np.stack([edges // n, edges % n], axis=1)[singular_edge]
+    turns = np.rint(_ANGLE[G[singular_edge]] / (np.pi / 2)).astype(np.int64)
+    chains = _components(pairs)
+    on_boundary = boundary_vertices(cells)
+    degree = np.bincount(pairs.ravel(), minlength=n)
+    open_ends = np.flatnonzero((degree == 1) & ~on_boundary)
+    return SingularGraph(edges=pairs, turn=turns, chains=chains, open_ends=open_ends,
+                         boundary_edges=int(np.count_nonzero(~closed)))
+
+
+def orient(cells: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The tetrahedra with two vertices swapped where their volume is negative."""
+    e = x[cells[:, 1:]] - x[cells[:, [0]]]
+    negative = np.einsum("ni,ni->n", e[:, 0], np.cross(e[:, 1], e[:, 2])) < 0
+    return np.where(negative[:, None], cells[:, [0, 2, 1, 3]], cells)
+
+
+#: Multiplication table of :data:`OCTAHEDRAL` (g_i g_j = g_k, k = _PRODUCT[i, j]) and
+#: the rotation angle of each element.
+_PRODUCT = np.array([[int(np.argmax(np.einsum("gij,ij->g", OCTAHEDRAL, gi @ gj)))
+                      for gj in OCTAHEDRAL] for gi in OCTAHEDRAL])
+_ANGLE = np.arccos(np.clip((np.trace(OCTAHEDRAL, axis1=1, axis2=2) - 1) / 2, -1, 1))
 
 
 def _components(edges: np.ndarray) -> np.ndarray:
