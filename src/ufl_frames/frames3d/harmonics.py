@@ -138,6 +138,33 @@ for _b, _beta in enumerate(_CUBICS):
 _RAISE_TO_Q = np.concatenate([_RAISE[:, k, :] @ TO_Q.T for k in range(3)])
 
 
+def _rotation_generators() -> np.ndarray:
+    """L_k (3, 15, 15): d/dθ of the coefficients of T rotated by θ about the axis e_k, at
+    θ = 0 (the polynomial p(x) becomes p(R_θᵀ x), whose derivative is −∇p · (e_k × x))."""
+    index = {e: i for i, e in enumerate(MONOMIALS)}
+    out = np.zeros((3, len(MONOMIALS), len(MONOMIALS)))
+    for k in range(3):
+        e_k = np.eye(3)[k]
+        D = np.zeros((len(MONOMIALS), len(MONOMIALS)))
+        for col, alpha in enumerate(MONOMIALS):
+            for j in range(3):  # ∂_j x^α · (e_k × x)_j, (e_k × x)_j = Σ_l ε_jkl... as a sum
+                if alpha[j] == 0:
+                    continue
+                lowered = list(alpha)
+                lowered[j] -= 1
+                # (e_k × x)_j = Σ_m c_jm x_m with c = [e_k]×
+                cross = np.cross(e_k, np.eye(3))  # row m: e_k × e_m
+                for m_ in range(3):
+                    c = cross[m_, j]
+                    if c == 0:
+                        continue
+                    raised = list(lowered)
+                    raised[m_] += 1
+                    D[index[tuple(raised)], col] -= alpha[j] * c
+        out[k] = TO_Q @ D @ FROM_Q
+    return out
+
+
 def _cubic_monomials(u: np.ndarray) -> np.ndarray:
     """The weighted cubic monomials (N, 10) of u: (u·x)³ = Σ_β weight(β) u^β x^β."""
     x, y, z = (np.ascontiguousarray(u[:, k]) for k in range(3))
@@ -207,3 +234,8 @@ def symmetric_of_mandel(m: np.ndarray) -> np.ndarray:
     for k, (i, j) in enumerate(MANDEL_PAIRS):
         out[..., i, j] = out[..., j, i] = s[..., k]
     return out
+
+
+#: The rotation generators on q: the coefficients of T turned by a small rotation w
+#: (axis-angle) change by Σ_k w_k L_k q.
+ROTATION_GENERATORS = _rotation_generators()

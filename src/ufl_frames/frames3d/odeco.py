@@ -179,16 +179,13 @@ def _rodrigues(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
 
 
-def _rotation_columns(R, lengths, axes) -> np.ndarray:
-    """d q / d ω_a (N, 15, len(axes)): the frame turned about its own axis u_a (only the
-    other two branches move: d u_i = u_a × u_i)."""
-    n = R.shape[0]
-    pairs = [(a, i) for a in axes for i in range(3) if i != a]
-    u = np.concatenate([R[:, :, i] for _, i in pairs])
-    du = np.concatenate([np.cross(R[:, :, a], R[:, :, i]) for a, i in pairs])
-    scale = np.concatenate([4.0 * lengths[:, i] for _, i in pairs])
-    terms = (scale[:, None] * harmonics.q_of_powers(u, du)).reshape(len(axes), 2, n, -1)
-    return terms.sum(axis=1).transpose(1, 2, 0)
+def _rotation_columns(R, q_frame, axes) -> np.ndarray:
+    """d q / d ω_a (N, 15, len(axes)) of the frames q_frame (N, 15) turned about their own
+    axes u_a (the columns ``axes`` of R): L(u_a) q_frame, with the rotation generators
+    L(w) = Σ_k w_k L_k on the coefficients."""
+    L = harmonics.ROTATION_GENERATORS
+    turned = np.einsum("kij,nj->nki", L, q_frame)  # (N, 3, 15): L_k q
+    return np.einsum("nka,nki->nia", R[:, :, list(axes)], turned)
 
 
 def _fit_lengths(q, B, isotropic: bool) -> np.ndarray:
@@ -213,19 +210,19 @@ def _refine(q, R, axes=(0, 1, 2), isotropic=False):
     lengths eliminated: variable projection), from R, each step halved until the distance
     decreases. Returns (R, lengths)."""
     R = R.copy()
+    f, B, lam, r = _residual2(q, R, isotropic)
     active = np.ones(q.shape[0], dtype=bool)
     for _ in range(_GN_ITERATIONS):
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break
-        Ra, qa = R[idx], q[idx]
-        f, B, lam, r = _residual2(qa, Ra, isotropic)
+        Ra, qa, Ba = R[idx], q[idx], B[idx]
         # the lengths' directions projected out (variable projection, Kaufman's step)
-        J = _rotation_columns(Ra, lam, axes)
-        Bs = B.sum(axis=1)[:, None, :] if isotropic else B
+        J = _rotation_columns(Ra, qa - r[idx], axes)
+        Bs = Ba.sum(axis=1)[:, None, :] if isotropic else Ba
         Jp = J - Bs.transpose(0, 2, 1) @ np.linalg.solve(Bs @ Bs.transpose(0, 2, 1), Bs @ J)
         H = Jp.transpose(0, 2, 1) @ Jp
-        g = np.einsum("nka,nk->na", Jp, r)
+        g = np.einsum("nka,nk->na", Jp, r[idx])
         scale = np.trace(H, axis1=1, axis2=2)[:, None, None] / len(axes)
         H = H + 1e-12 * (scale + 1e-300) * np.eye(len(axes))
         step = np.linalg.solve(H, g[:, :, None])[:, :, 0]
@@ -235,8 +232,11 @@ def _refine(q, R, axes=(0, 1, 2), isotropic=False):
             w = np.zeros((rows.size, 3))
             w[:, list(axes)] = step[rows] * t[:, None]
             trial = Ra[rows] @ _rodrigues(w)
-            better = _residual2(qa[rows], trial, isotropic)[0] <= f[rows] * (1 + 1e-15)
-            R[idx[rows[better]]] = trial[better]
+            f_new, B_new, lam_new, r_new = _residual2(qa[rows], trial, isotropic)
+            better = f_new <= f[idx[rows]] * (1 + 1e-15)
+            at = idx[rows[better]]
+            R[at], f[at], B[at], lam[at], r[at] = (trial[better], f_new[better], B_new[better],
+                                                   lam_new[better], r_new[better])
             taken[rows[better]] = np.abs(w[better]).max(axis=1)
             rows, t = rows[~better], 0.5 * t[~better]
             if rows.size == 0:
@@ -244,7 +244,6 @@ def _refine(q, R, axes=(0, 1, 2), isotropic=False):
         # converged: the last step was small (its error is of its size squared), or no
         # step along the Gauss-Newton direction lowers the distance
         active[idx] = taken > _STEP_TOL
-    lam = _fit_lengths(q, _branch_q(R), isotropic)
     return R, lam
 
 
@@ -322,7 +321,8 @@ def tangent_basis(q) -> np.ndarray:
     to q: three rotations about the frame's axes, three lengths (fewer independent
     columns at degenerate frames, where QR leaves near-zero columns)."""
     lam, R = q_to_frames(q)
-    J = np.concatenate([_rotation_columns(R, lam, (0, 1, 2)),
-                        _branch_q(R).transpose(0, 2, 1)], axis=2)
+    B = _branch_q(R)
+    J = np.concatenate([_rotation_columns(R, np.einsum("ni,nik->nk", lam, B), (0, 1, 2)),
+                        B.transpose(0, 2, 1)], axis=2)
     Q, _ = np.linalg.qr(J)
     return Q
