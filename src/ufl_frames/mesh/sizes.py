@@ -49,6 +49,7 @@ _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
            ast.Div: operator.truediv, ast.Pow: operator.pow, ast.Mod: operator.mod}
 _UNARY = {ast.UAdd: operator.pos, ast.USub: operator.neg}
 _MAX_LENGTH = 1000
+_MAX_DEPTH = 100
 
 
 class SizeExpressionError(ValueError):
@@ -60,10 +61,14 @@ def _describe(node: ast.AST) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _check_tree(node: ast.AST) -> None:
+def _check_tree(node: ast.AST, depth: int = 0) -> None:
     """Raise :class:`SizeExpressionError` at the first node a size expression may not use."""
+    if depth > _MAX_DEPTH:
+        raise SizeExpressionError(f"the size expression is nested more than {_MAX_DEPTH} "
+                                  f"levels deep")
+    depth += 1
     if isinstance(node, ast.Expression):
-        _check_tree(node.body)
+        _check_tree(node.body, depth)
     elif isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             raise SizeExpressionError(f"only numbers are allowed as constants, got "
@@ -75,12 +80,12 @@ def _check_tree(node: ast.AST) -> None:
     elif isinstance(node, ast.BinOp):
         if type(node.op) not in _BINARY:
             raise SizeExpressionError(f"operator not allowed in {_describe(node)}")
-        _check_tree(node.left)
-        _check_tree(node.right)
+        _check_tree(node.left, depth)
+        _check_tree(node.right, depth)
     elif isinstance(node, ast.UnaryOp):
         if type(node.op) not in _UNARY:
             raise SizeExpressionError(f"operator not allowed in {_describe(node)}")
-        _check_tree(node.operand)
+        _check_tree(node.operand, depth)
     elif isinstance(node, ast.Call):
         if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
             raise SizeExpressionError(f"only the functions {', '.join(sorted(FUNCTIONS))} "
@@ -92,7 +97,7 @@ def _check_tree(node: ast.AST) -> None:
         for argument in node.args:
             if isinstance(argument, ast.Starred):
                 raise SizeExpressionError(f"no * arguments allowed, got {_describe(node)}")
-            _check_tree(argument)
+            _check_tree(argument, depth)
     else:
         raise SizeExpressionError(f"'{_describe(node)}' is not allowed in a size expression "
                                   f"(only numbers, x, y, + - * / ** %, and NumPy functions)")
