@@ -29,8 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SizeTarget", "SizeExpressionError",
-           "file_size_samples", "parse_size_expression", "quad_count_factor"]
+__all__ = ["DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS", "SizeExpressionError",
+           "SizeTarget", "file_size_samples", "parse_size_expression", "quad_count_factor",
+           "read_file_sizes"]
 
 #: w of the sized energy H + w H_s M (see :func:`ufl_frames.fem.energy.size_misfit_form`):
 #: dimensionless, measured in ``docs/note-checks.md`` ("The sized problem").
@@ -45,6 +46,8 @@ FUNCTIONS = {
 }
 FUNCTIONS.update({"min": np.minimum, "max": np.maximum})
 _NAMES = {"pi": math.pi, "e": math.e}
+#: The words ``--size`` takes besides an expression.
+SIZE_WORDS = ("file", "uniform", "none")
 _BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
            ast.Div: operator.truediv, ast.Pow: operator.pow, ast.Mod: operator.mod}
 _UNARY = {ast.UAdd: operator.pos, ast.USub: operator.neg}
@@ -319,3 +322,25 @@ def file_size_samples() -> np.ndarray | None:
     samples = samples[np.isfinite(samples).all(axis=1) & (samples[:, 2] > 0)
                       & (samples[:, 2] < 1e21)]
     return samples if len(samples) else None
+
+
+def read_file_sizes(path: str) -> np.ndarray | None:
+    """:func:`file_size_samples` of the geometry file ``path``, opened in Gmsh for that
+    alone (the current process; Gmsh initialised here if it is not): None where the file
+    sets no sizes. Rank 0's work."""
+    import gmsh
+
+    owns = not gmsh.isInitialized()
+    if owns:
+        gmsh.initialize(argv=[], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("ufl_frames_sizes")
+        gmsh.open(str(path))
+        try:
+            return file_size_samples()
+        finally:
+            gmsh.model.remove()
+    finally:
+        if owns:
+            gmsh.finalize()
