@@ -429,6 +429,19 @@ def size_target(config: RunConfig, comm):
     return SizeTarget.of_samples(samples, weight)
 
 
+def _check_size_target(target, domain, comm) -> None:
+    """Raise :class:`InputError` on every rank where ``target`` is not finite and positive
+    at a vertex of ``domain`` on some rank (collective)."""
+    problem = None
+    try:
+        target(domain.mesh.geometry.x[:, :2])
+    except (ValueError, TypeError, ArithmeticError) as e:
+        problem = str(e).splitlines()[0] if str(e) else type(e).__name__
+    problems = [p for p in comm.allgather(problem) if p]
+    if problems:
+        raise InputError(problems[0])
+
+
 class _Solve:
     """The run after meshing: the field's solve with its monitors and checkpoints, the
     report, the stages and the output folder (the steps of :func:`run`).
@@ -526,6 +539,7 @@ class _Solve:
         config = self.config
         self.size_target = size_target(config, self.comm)
         if self.size_target is not None:
+            _check_size_target(self.size_target, domains[-1], self.comm)
             self.say(f"size target: {self.size_target.describe()} "
                      f"(weight {self.size_target.weight:g})")
         with options_scope():  # the solvers' defaults end with the run
