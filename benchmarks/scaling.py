@@ -82,11 +82,10 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 
     from ufl_frames.mesh import build
     from ufl_frames.mesh.hierarchy import nested_domains
+    from ufl_frames.mesh.sizes import SizeTarget
     from ufl_frames.pipeline import FrameField
     from ufl_frames.pipeline.files import write_field
     from ufl_frames.pipeline.stages import quadrangulate
-
-    from ufl_frames.mesh.sizes import SizeTarget
 
     comm = MPI.COMM_WORLD
     shape, kind = case.split("-")
