@@ -46,7 +46,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-CASES = ("piano-noniso", "piano-iso", "annulus-noniso", "annulus-iso")
+#: ``-sized``: non-isotropic frames with the uniform size target (the CLI's default for
+#: them, ``mesh.sizes.SizeTarget``); ``-noniso`` the unsized, degenerate problem.
+CASES = ("piano-noniso", "piano-iso", "annulus-noniso", "annulus-iso", "piano-sized",
+         "annulus-sized")
 #: Triangles at h = 0.05 (measured), for --triangles.
 STAGES = ("mesh", "mbo", "solve", "write")
 GROWTH_LIMIT = 1.3  # per 2x refinement, Newton iterations and mean Krylov iterations
@@ -79,12 +82,14 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
 
     from ufl_frames.mesh import build
     from ufl_frames.mesh.hierarchy import nested_domains
+    from ufl_frames.mesh.sizes import SizeTarget
     from ufl_frames.pipeline import FrameField
     from ufl_frames.pipeline.files import write_field
     from ufl_frames.pipeline.stages import quadrangulate
 
     comm = MPI.COMM_WORLD
     shape, kind = case.split("-")
+    size = SizeTarget.uniform() if kind == "sized" else None
     stages, cpu = {}, {}
 
     def stage(name, func):
@@ -107,10 +112,11 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     if len(domains) > 1:
         stages["mbo"] = cpu["mbo"] = 0.0
         field = stage("solve", lambda: FrameField.nested(domains, isotropic=kind == "iso",
-                                                         max_it=max_it))
+                                                         max_it=max_it, size=size))
         result = field.result
     else:
-        field = stage("mbo", lambda: FrameField.initial(domain, isotropic=kind == "iso"))
+        field = stage("mbo", lambda: FrameField.initial(domain, isotropic=kind == "iso",
+                                                        size=size))
         result = stage("solve", lambda: field.solve(max_it=max_it))
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
@@ -122,6 +128,16 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         quad_record = {key: found[key] for key in ("quads", "irregular_vertices", "min_sj",
                                                    "mean_sj", "valid", "quantisation",
                                                    "seconds")}
+    near_bound = None  # the share of vertices within 10 % of the aspect bound
+    if kind != "iso" and field.max_aspect:
+        import numpy as np
+
+        from ufl_frames.frames2d.algebra import ALGEBRA
+
+        owned = field.q.function_space.dofmap.index_map.size_local
+        lengths, _ = ALGEBRA.q_to_frames(field.q.x.array.reshape(-1, ALGEBRA.count)[:owned])
+        near = int(np.count_nonzero(lengths.max(1) / lengths.min(1) > 0.9 * field.max_aspect))
+        near_bound = comm.allreduce(near, op=MPI.SUM) / comm.allreduce(owned, op=MPI.SUM)
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)
     krylov = result.krylov_iterations or []
     newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
@@ -133,6 +149,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         "mesh_size": domain.mesh_size,
         "stages": stages, "cpu_rank0": cpu, "total": sum(stages.values()),
         "iterations": result.iterations, "converged_reason": result.converged_reason,
+        "near_bound": near_bound,
         "ksp_mean": sum(newton) / len(newton) if newton else None,
         "ksp_max": max(newton) if newton else None, "ksp_per_step": krylov,
         "factorisations_mean": sum(faces) / len(faces) if faces else None,

@@ -120,6 +120,19 @@ def _levels(text: str):
     return value
 
 
+def _size(text: str) -> str:
+    """``--size``: 'file', 'uniform', 'none' or a size expression (checked here)."""
+    from ufl_frames.mesh.sizes import SIZE_WORDS, SizeExpressionError, parse_size_expression
+
+    if text.strip() in SIZE_WORDS:
+        return text.strip()
+    try:
+        parse_size_expression(text)
+    except SizeExpressionError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return text
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -209,6 +222,17 @@ def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
     solve.add_argument("--quad-size", type=_positive_float, default=None, metavar="S",
                        help="the quads' mean edge length (default: with --quads the triangles' "
                        "mean edge length; with --param only, about one quad per 8 triangles)")
+    solve.add_argument("--size", type=_size, default=None, metavar="EXPR",
+                       help="the quads' size h(x, y) that non-isotropic frames follow, up to "
+                       "a global factor: a NumPy expression in x and y (e.g. "
+                       "\"0.02 + 0.1*hypot(x, y)\"), 'file' (the file's own point sizes, "
+                       "MeshSize and size fields, as Gmsh evaluates them), 'uniform', or "
+                       "'none' (no size target: the degenerate problem). Default: the file's "
+                       "sizes where it sets any, else uniform")
+    solve.add_argument("--size-weight", type=_non_negative_float, default=None, metavar="W",
+                       help="w of the sized energy H + w H_s M (default 0.3)")
+    solve.add_argument("--quad-count", type=_positive_int, default=None, metavar="N",
+                       help="with --quads: about N quads (instead of --quad-size)")
     solve.add_argument("--free-singularities", action="store_true",
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "

@@ -61,12 +61,16 @@ class RunConfig:
     quads: bool = False
     quad_size: float | None = None
     quiet: bool = False
-    #: The quads' count asked for instead of their size: quad size sqrt(area / count).
+    #: The quads' count asked for instead of their size (the stage scales the size to it).
     quad_count: int | None = None
     #: Write the field's files (frames.*, convergence.png); ``ufl-frames mesh`` does not.
     field_files: bool = True
     #: Move the quads' boundary nodes onto the CAD curves (:mod:`ufl_frames.mesh.cad`).
     on_cad: bool = False
+    #: ``--size``: an expression, 'file', 'uniform', 'none', or None (the file's sizes
+    #: where it sets any, else uniform); ``--size-weight`` (None: the default w).
+    size: str | None = None
+    size_weight: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "geometry", str(self.geometry))
@@ -245,6 +249,14 @@ def _check_config(config: RunConfig, petsc_options: dict) -> None:
     if pin_radius > 0 and config.free_singularities:
         raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
                          "with --free-singularities")
+    if config.size not in (None, "none") and (config.isotropic or config.conformal):
+        raise InputError("--size is followed by non-isotropic frames only: isotropic "
+                         "frames (--isotropic, --conformal) have their scale fixed by their "
+                         "directions")
+    if config.quad_count is not None and not config.quads:
+        raise InputError("--quad-count needs --quads")
+    if config.quad_count is not None and config.quad_size is not None:
+        raise InputError("--quad-count and --quad-size both set the quads' size: give one")
     problem = petsc_option_problem(petsc_options)
     if problem is not None:
         raise InputError(problem)
@@ -285,7 +297,7 @@ def run_record(config: RunConfig, comm, petsc_options: dict) -> dict:
     record = {"geometry": geometry, "geometry_id": identity}
     for name in ("isotropic", "mesh_size", "size_factor", "max_triangles", "max_aspect",
                  "free_singularities", "pin_radius", "max_it", "conformal", "levels",
-                 "nested_meshes"):
+                 "nested_meshes", "size", "size_weight"):
         record[name] = getattr(config, name)
     record["pin_radius"] = float(record["pin_radius"])
     record["petsc_options"] = sorted([name, value] for name, value in petsc_options.items()
@@ -409,6 +421,57 @@ def run(config: RunConfig, comm=None) -> dict:
         interrupts.note_checkpoint(None)
 
 
+def size_target(config: RunConfig, comm):
+    """The run's :class:`~ufl_frames.mesh.sizes.SizeTarget` (collective), None for
+    isotropic frames, the conformal scale and ``--size none``.
+
+    Without ``--size``, a geometry file that sets sizes of its own (point sizes,
+    ``MeshSize``, size fields) gets them (the triangles are made with them too, see
+    :mod:`ufl_frames.mesh.meshing`), anything else the uniform target. ``--size file``
+    on a file that sets none is an input error.
+    """
+    from ufl_frames import mesh as geometry_module
+    from ufl_frames.mesh.sizes import DEFAULT_SIZE_WEIGHT, SizeTarget, read_file_sizes
+
+    if config.isotropic or config.conformal or config.size == "none":
+        return None
+    weight = DEFAULT_SIZE_WEIGHT if config.size_weight is None else config.size_weight
+    if config.size not in (None, "file"):
+        if config.size == "uniform":
+            return SizeTarget.uniform(weight)
+        return SizeTarget.expression(config.size, weight)
+    samples = None
+    if config.geometry not in geometry_module.KNOWN_GEOMETRIES:
+        error = None
+        if comm.rank == 0:
+            try:
+                samples = read_file_sizes(config.geometry)
+            except Exception as e:  # a file Gmsh meshed already: should not happen
+                error = f"reading the sizes of {config.geometry}: {e}"
+        samples, error = comm.bcast((samples, error), root=0)
+        if error is not None:
+            raise RunError(error)
+    if samples is None:
+        if config.size == "file":
+            raise InputError(f"--size file: {config.geometry} sets no sizes (point sizes, "
+                             f"MeshSize or size fields)")
+        return SizeTarget.uniform(weight)
+    return SizeTarget.of_samples(samples, weight)
+
+
+def _check_size_target(target, domain, comm) -> None:
+    """Raise :class:`InputError` on every rank where ``target`` is not finite and positive
+    at a vertex of ``domain`` on some rank (collective)."""
+    problem = None
+    try:
+        target(domain.mesh.geometry.x[:, :2])
+    except (ValueError, TypeError, ArithmeticError) as e:
+        problem = str(e).splitlines()[0] if str(e) else type(e).__name__
+    problems = [p for p in comm.allgather(problem) if p]
+    if problems:
+        raise InputError(problems[0])
+
+
 class _Solve:
     """The run after meshing: the field's solve with its monitors and checkpoints, the
     report, the stages and the output folder (the steps of :func:`run`).
@@ -426,6 +489,7 @@ class _Solve:
         self.tao_type = None
         self.max_it = config.max_it  # -tao_max_it wins
         self.param = self.quads = None  # the stages' records
+        self.size_target = None  # the solve's SizeTarget (None: H alone)
         self._finest_space = None
         self._levels = 1
 
@@ -503,13 +567,19 @@ class _Solve:
         from ufl_frames.pipeline import FrameField
 
         config = self.config
+        self.size_target = size_target(config, self.comm)
+        if self.size_target is not None:
+            _check_size_target(self.size_target, domains[-1], self.comm)
+            self.say(f"size target: {self.size_target.describe()} "
+                     f"(weight {self.size_target.weight:g})")
         with options_scope():  # the solvers' defaults end with the run
             if len(domains) == 1:  # nested iteration runs MBO on its coarsest mesh only
                 self.say("MBO initial field ...")
                 with failures("the MBO initial field"):
                     self.field = FrameField.initial(domains[0], isotropic=config.isotropic,
                                                     max_aspect=config.max_aspect,
-                                                    monitor=self.mbo_monitor)
+                                                    monitor=self.mbo_monitor,
+                                                    size=self.size_target)
             self.tao_type = PETSc.Options().getString("tao_type",
                                                       solvers.DEFAULT_OPTIONS["tao_type"])
             if config.conformal:
@@ -546,7 +616,8 @@ class _Solve:
                 pin_singularities=not config.free_singularities, max_it=config.max_it,
                 pin_radius=config.pin_radius, monitor=self.tao_monitor,
                 mbo_monitor=self.mbo_monitor, level_monitor=self.level_monitor,
-                checkpoint=self.keep_finest, restore=self.restore_finest)
+                checkpoint=self.keep_finest, restore=self.restore_finest,
+                size=self.size_target)
         self.result = self.field.result
 
     def _single(self) -> None:
@@ -610,7 +681,8 @@ class _Solve:
             with failures("the quad mesh"):
                 try:
                     root = stages.RootField(self.field) if root is None else root
-                    self.quads = stages.quadrangulate(root, quad_size=quad_size)
+                    self.quads = stages.quadrangulate(root, quad_size=config.quad_size,
+                                                      quad_count=config.quad_count)
                 except ValueError as e:  # no valid integer-grid map: the same on every rank
                     raise RunError(str(e)) from e
             if config.on_cad:
@@ -726,6 +798,19 @@ class _Solve:
                                        groups=self.field.domain.physical_groups)
         return [*names, "summary.json"]
 
+    def size_summary(self) -> dict | None:
+        """The ``sizes`` record (:func:`ufl_frames.pipeline.sizes.size_record`) of a sized
+        solve, None without a size target (collective)."""
+        from ufl_frames.pipeline.sizes import size_record
+
+        if self.size_target is None or self.field is None or self.field.isotropic:
+            return None
+        return size_record(self.field, self.size_target,
+                           param=None if self.param is None else self.param.quality,
+                           quads=None if self.quads is None else self.quads.quality,
+                           quad_mesh=None if self.quads is None else self.quads.mesh,
+                           quad_count=self.config.quad_count)
+
     def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:
         """The record for ``summary.json`` (collective): the field's kind, the run's
         settings, the findings, the time and the files.
@@ -756,6 +841,7 @@ class _Solve:
             "petsc_options": petsc_options,
             "resumed_from_iteration": None if self.state is None else self.state.iterations,
             **findings_record(self.field, self.param, self.quads),
+            "sizes": self.size_summary(),
             "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
             "files": files,
         }

@@ -143,6 +143,75 @@ def gauss_newton_form(q, algebra=ALGEBRA) -> ufl.Form:
     return ufl.inner(ufl.derivative(bracket, q, dq), ufl.derivative(bracket, q, w)) * ufl.dx
 
 
+#: s = l1 + l2 of a frame from its first coefficient, q0 = 3√2 s/8.
+_SUM_PER_Q0 = 8.0 / (3.0 * np.sqrt(2.0))
+#: The quadrature degree of the size misfit's forms (not polynomial in q: UFL's estimate of
+#: a logarithm's degree is arbitrary).
+SIZE_QUADRATURE_DEGREE = 2
+
+
+def log_size(q) -> ufl.core.expr.Expr:
+    r"""σ(q) = ½ log(l1 l2), the log of a frame's size, in q's coefficients: with
+    s = l1 + l2 = 8 q0/(3√2) and d² = (l1 − l2)² = 4 (q1² + q2²), l1 l2 = (s² − d²)/4.
+    A polynomial of q inside the logarithm: smooth at isotropic frames (d = 0), where the
+    lengths l1, l2 themselves (read from |B| = d/2) are not."""
+    s = _SUM_PER_Q0 * q[0]
+    return 0.5 * ufl.ln((s * s - 4.0 * (q[1] * q[1] + q[2] * q[2])) / 4.0)
+
+
+def anisotropy(q) -> ufl.core.expr.Expr:
+    r"""β(q) = 2 (q1, q2)/s, of length |β| = (l1 − l2)/(l1 + l2) = tanh(½ log(l1/l2)): the
+    frame's anisotropy as a vector (its direction is the frame's 2t), smooth where |β| is
+    not."""
+    s = _SUM_PER_Q0 * q[0]
+    return ufl.as_vector([2.0 * q[1] / s, 2.0 * q[2] / s])
+
+
+def size_misfit_form(q, log_h, inverse_area) -> ufl.Form:
+    r"""M(q) = ½ ∫ |∇(σ(q) − log h)|² dx + ½ (1/A) ∫ |β(q)|² dx: how far the frames'
+    sizes are from the target h, as a UFL form.
+
+    The first term compares the log of the frame's size √(l1 l2) with log h through their
+    gradients: it is zero exactly when l1 l2 = c² h² for one constant c, so it asks for the
+    sizes of h up to the global factor that the map's scale (or a number of quads) sets
+    afterwards, and it does not fight the normalisation of the frame manifold (it is
+    homogeneous of degree 0 in q: dM(q)[q] = 0). The second asks for square quads: |β|² is
+    ((l1 − l2)/(l1 + l2))², averaged over the area A. Both are dimensionless (invariant
+    under x → s x) and free of the mesh. An integrable isotropic field of size ∝ h (log h
+    harmonic, the directions turning as conformality says) has M = 0.
+
+    Args:
+        q: the frame field (its frames must have l1 l2 > 0: a finite aspect bound).
+        log_h: log h, a scalar Function (P1) or expression.
+        inverse_area: 1/A (a Constant or a number).
+    """
+    metadata = {"quadrature_degree": SIZE_QUADRATURE_DEGREE}
+    misfit = ufl.grad(log_size(q) - log_h)
+    beta = anisotropy(q)
+    return (0.5 * ufl.inner(misfit, misfit) + 0.5 * inverse_area * ufl.inner(beta, beta)) \
+        * ufl.dx(metadata=metadata)
+
+
+def size_gauss_newton_form(q, log_h, inverse_area) -> ufl.Form:
+    r"""The Gauss–Newton form of M (:func:`size_misfit_form`): ∫ ∇Dσ[δq]·∇Dσ[w] dx +
+    (1/A) ∫ Dβ[δq]·Dβ[w] dx, w the test and δq the trial function."""
+    V = q.function_space
+    w, dq = ufl.TestFunction(V), ufl.TrialFunction(V)
+    metadata = {"quadrature_degree": SIZE_QUADRATURE_DEGREE}
+    grad_sigma = ufl.grad(log_size(q))
+    beta = anisotropy(q)
+    return (ufl.inner(ufl.derivative(grad_sigma, q, dq), ufl.derivative(grad_sigma, q, w))
+            + inverse_area * ufl.inner(ufl.derivative(beta, q, dq), ufl.derivative(beta, q, w))
+            ) * ufl.dx(metadata=metadata)
+
+
+def size_hessian_form(q, log_h, inverse_area) -> ufl.Form:
+    """The second derivative of M (:func:`size_misfit_form`) as a bilinear form."""
+    V = q.function_space
+    M = size_misfit_form(q, log_h, inverse_area)
+    return ufl.derivative(ufl.derivative(M, q, ufl.TestFunction(V)), q, ufl.TrialFunction(V))
+
+
 def assemble_energy(form) -> float:
     """Assemble a scalar form (UFL or compiled) over all ranks (collective)."""
     compiled = form if isinstance(form, fem.Form) else fem.form(form)

@@ -7,6 +7,11 @@ evaluates at the point ``q = R(x/√m)`` of an iterate x:
 * H(q), assembled by DOLFINx from the UFL form;
 * the Riemannian gradient in x (the note's steps 1–2 and the sphere's tangent).
 
+With a size target (:class:`SizeTerm`, ``frame_problem(..., size=SizeTarget)``) the objective
+is the sized energy J(q) = H(q) + w H_s M(q), M the size misfit of
+:func:`~ufl_frames.fem.energy.size_misfit_form` and H_s = (ρ²/A)² the energy scale (constant
+on 𝓜), so that the weight w is dimensionless; what is said of H below is then said of J.
+
 What a step needs is passed explicitly: :meth:`FrameProblem.evaluation` returns the
 energy and Euclidean gradient at the current ``q`` as an :class:`Evaluation`, cached on
 the version of ``q`` while a solver tracks it (:meth:`FrameProblem.tracking`), so that
@@ -34,16 +39,44 @@ from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
 from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT  # noqa: E402
 
-__all__ = ["Evaluation", "FrameProblem", "frame_problem"]
+__all__ = ["Evaluation", "FrameProblem", "SizeTerm", "frame_problem"]
 
 
 @dataclass(frozen=True)
 class Evaluation:
-    """H and its Euclidean gradient ∂H/∂x (local rows, (N, count); ghost rows are partial
-    sums, meaningful only pointwise) at one version of ``q``."""
+    """The objective (H, or J = H + w H_s M with a size target) and its Euclidean gradient
+    ∂/∂x (local rows, (N, count); ghost rows are partial sums, meaningful only pointwise)
+    at one version of ``q``; ``integrability`` is H alone (x·∇J = 4H: the sphere's
+    curvature)."""
 
     energy: float
     gradient_x: np.ndarray = field(repr=False)
+    integrability: float | None = None
+
+
+@dataclass
+class SizeTerm:
+    """The size target's term w H_s M(q) of the sized energy: log h at the vertices, the
+    weight's Constant (w H_s), the UFL misfit and its compiled form.
+
+    ``target`` is the :class:`~ufl_frames.mesh.sizes.SizeTarget` it was made from."""
+
+    target: object
+    log_h: fem.Function
+    inverse_area: fem.Constant
+    coefficient: fem.Constant
+    misfit_ufl: object = field(repr=False)
+    misfit: fem.Form = field(repr=False)
+
+    @property
+    def weight(self) -> float:
+        """w H_s, the misfit's factor in the objective."""
+        return float(self.coefficient.value)
+
+    def hessian_ufl(self, q, exact: bool):
+        """The weighted second derivative (``exact``) or Gauss–Newton form of the term."""
+        make = energy.size_hessian_form if exact else energy.size_gauss_newton_form
+        return self.coefficient * make(q, self.log_h, self.inverse_area)
 
 
 @dataclass
@@ -64,6 +97,8 @@ class FrameProblem:
     #: With it, :attr:`held` is the active set itself (rows on the bound): the gradient
     #: adds none (the Newton model's ``-frames_active_consistent`` rule).
     held_only: bool = field(default=False, repr=False)
+    #: The size target's term (None: the objective is H alone).
+    size: SizeTerm | None = field(default=None, repr=False)
     #: Counts the changes of q made here (retractions); keys the cached evaluation.
     _version: int = field(default=0, repr=False)
     _evaluated: tuple | None = field(default=None, repr=False)  # (version, Evaluation)
@@ -181,10 +216,24 @@ class FrameProblem:
     # --- energies and gradients ------------------------------------------------------
 
     def energy(self) -> float:
-        """H(q), assembled."""
+        """The objective: H(q), or J(q) = H + w H_s M with a size target, assembled."""
+        local = fem.assemble_scalar(self.integrability)
+        if self.size is not None:
+            local += self.size.weight * fem.assemble_scalar(self.size.misfit)
+        return self.q.function_space.mesh.comm.allreduce(local, op=MPI.SUM)
+
+    def integrability_energy(self) -> float:
+        """H(q) alone, assembled."""
         return self.q.function_space.mesh.comm.allreduce(
             fem.assemble_scalar(self.integrability), op=MPI.SUM
         )
+
+    def size_misfit(self) -> float:
+        """M(q), the size misfit (without its weight); 0 without a size target."""
+        if self.size is None:
+            return 0.0
+        return self.q.function_space.mesh.comm.allreduce(
+            fem.assemble_scalar(self.size.misfit), op=MPI.SUM)
 
     def dirichlet_energy(self) -> float:
         """E(q) = ½∫|∇q|², assembled."""
@@ -196,7 +245,9 @@ class FrameProblem:
         """H and ∂H/∂x at the current q: one vector assembly (cached while tracked).
 
         H comes free with the gradient: the discrete H is a homogeneous quartic in the
-        coefficients of q, so dH(q)[q] = 4 H(q) (Euler) — no second assembly.
+        coefficients of q, so dH(q)[q] = 4 H(q) (Euler) — no second assembly. The size
+        misfit M is homogeneous of degree 0 (dM(q)[q] = 0), so that stays true of the
+        sized gradient; M itself is one more scalar assembly.
         """
         if self._tracking and self._evaluated is not None \
                 and self._evaluated[0] == self._version:
@@ -208,7 +259,10 @@ class FrameProblem:
             float(np.dot(b.array[:owned], self.q.x.array[:owned])), op=MPI.SUM) / 4
         # Ghost rows of b are partial sums: used pointwise (active sets), never summed.
         gradient_x = b.array.reshape(-1, self.algebra.count) / self.sqrt_mass[:, None]
-        result = Evaluation(energy=H, gradient_x=gradient_x)
+        objective = H
+        if self.size is not None:
+            objective = H + self.size.weight * self.size_misfit()
+        result = Evaluation(energy=objective, gradient_x=gradient_x, integrability=H)
         if self._tracking:
             self._evaluated = (self._version, result)
         return result
@@ -230,6 +284,7 @@ def frame_problem(
     constraints: FrameConstraints | None = None,
     pin_radius: float = 0.0,
     algebra=ALGEBRA,
+    size=None,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
@@ -253,6 +308,9 @@ def frame_problem(
             ``boundary_angles`` is then not needed.
         pin_radius: See ``pin_singularities``.
         algebra: The frame algebra of ``q`` (that of ``constraints`` where given).
+        size: A :class:`~ufl_frames.mesh.sizes.SizeTarget`: the objective is then the
+            sized energy J = H + w H_s M (w its ``weight``); None: H. Needs a finite
+            aspect bound (log(l1 l2) of the frames).
 
     Returns:
         The problem, ``q`` on 𝓜.
@@ -271,14 +329,45 @@ def frame_problem(
     projected = cone.closest_point(rows)
     manifold = FrameManifold(constraints, radius2=cone.norm2(projected))
     H = energy.integrability_energy_form(q, algebra)
+    area = constraints.comm.allreduce(float(constraints.weights[: constraints.owned].sum()),
+                                      op=MPI.SUM)
+    term, objective = None, H
+    if size is not None:
+        term = size_term(q, size, area, (manifold.radius2 / area) ** 2, constraints)
+        objective = H + term.coefficient * term.misfit_ufl
     problem = FrameProblem(
         q=q,
         manifold=manifold,
         integrability=fem.form(H),
-        gradient=fem.form(energy.gradient_form(H, q)),
+        gradient=fem.form(energy.gradient_form(objective, q)),
         dirichlet=fem.form(energy.dirichlet_energy_form(q)),
-        area=constraints.comm.allreduce(float(constraints.weights[: constraints.owned].sum()),
-                                        op=MPI.SUM),
+        area=area,
+        size=term,
     )
     q.x.array[:] = projected.ravel()
     return problem
+
+
+def size_term(q: fem.Function, target, area: float, energy_scale: float,
+              constraints: FrameConstraints) -> SizeTerm:
+    """The :class:`SizeTerm` of a size target on ``q``'s mesh: log h interpolated at the
+    vertices, the weight w H_s (w = ``target.weight``, H_s = ``energy_scale``).
+
+    Raises:
+        ValueError: the frames have no finite aspect bound, or h is not finite and
+            positive at every vertex (one line).
+    """
+    bound = constraints.max_aspect
+    if not constraints.isotropic and not (bound and np.isfinite(bound)):
+        raise ValueError("a size target needs a finite aspect bound (--max-aspect): the "
+                         "size of a frame is log(l1 l2), and l2 -> 0 without one")
+    mesh = q.function_space.mesh
+    S = fem.functionspace(mesh, ("Lagrange", 1))
+    log_h = fem.Function(S, name="log_h")
+    x = S.tabulate_dof_coordinates()
+    log_h.x.array[:] = np.log(target(x[:, :2]))
+    inverse_area = fem.Constant(mesh, PETSc.ScalarType(1.0 / area))
+    coefficient = fem.Constant(mesh, PETSc.ScalarType(target.weight * energy_scale))
+    misfit = energy.size_misfit_form(q, log_h, inverse_area)
+    return SizeTerm(target=target, log_h=log_h, inverse_area=inverse_area,
+                    coefficient=coefficient, misfit_ufl=misfit, misfit=fem.form(misfit))

@@ -67,6 +67,9 @@ class FrameField:
     levels: list[dict] | None = None
     #: Per level of :meth:`nested`: the solve's history (for ``convergence.png``).
     level_histories: list[list[dict]] | None = field(default=None, repr=False)
+    #: The size target of the solve (:class:`~ufl_frames.mesh.sizes.SizeTarget`; None:
+    #: the objective is H alone). Non-isotropic frames only.
+    size: object = None
 
     @classmethod
     def initial(
@@ -75,6 +78,7 @@ class FrameField:
         isotropic: bool = False,
         max_aspect: float | None = DEFAULT_MAX_ASPECT,
         monitor=None,
+        size=None,
     ) -> "FrameField":
         """The smooth boundary-aligned MBO cross field on ``domain`` (collective).
 
@@ -84,6 +88,7 @@ class FrameField:
             max_aspect: the bound on l_max/l_min of non-isotropic frames.
             monitor: ``monitor(level, tau, change)`` as for
                 :func:`ufl_frames.solvers.mbo.mbo_frame_field`.
+            size: the size target of the solves (ignored for isotropic frames).
 
         Returns:
             The field, with its boundary directions, constraints and singularities.
@@ -94,7 +99,8 @@ class FrameField:
         q = mbo.mbo_frame_field(V, constraints=constraints, monitor=monitor)
         return cls(domain=domain, q=q, isotropic=isotropic,
                    max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
-                   constraints=constraints, singularities=singularities.locate_singularities(q))
+                   constraints=constraints, singularities=singularities.locate_singularities(q),
+                   size=None if isotropic else size)
 
     def transferred(self, domain: Domain) -> "FrameField":
         """This field carried to another mesh of the same shape (collective): q interpolated
@@ -109,14 +115,15 @@ class FrameField:
         return FrameField(domain=domain, q=q, isotropic=self.isotropic,
                           max_aspect=self.max_aspect, boundary_angles=angles,
                           constraints=constraints,
-                          singularities=singularities.locate_singularities(q))
+                          singularities=singularities.locate_singularities(q),
+                          size=self.size)
 
     @classmethod
     def nested(cls, domains, isotropic: bool = False,
                max_aspect: float | None = DEFAULT_MAX_ASPECT, pin_singularities: bool = True,
                max_it: int | None = None, monitor=None, mbo_monitor=None,
                level_monitor=None, options_prefix: str = "", checkpoint=None,
-               restore=None, pin_radius: float = 0.0) -> "FrameField":
+               restore=None, pin_radius: float = 0.0, size=None) -> "FrameField":
         """Nested iteration: MBO and a solve on the coarsest of ``domains``, then on each
         finer one a solve from the coarser solution (:meth:`transferred`) (collective).
 
@@ -154,6 +161,7 @@ class FrameField:
                 the same transferred field, pins and tolerance as the run that saved it.
             pin_radius: also hold every vertex closer than this to a pinned singularity:
                 the same disk on every level.
+            size: the size target of the solves (non-isotropic frames; None: H alone).
 
         Returns:
             The field on the finest mesh; its :attr:`levels` lists the per-level summaries
@@ -170,7 +178,7 @@ class FrameField:
             finest = k == len(domains) - 1
             if field is None:
                 field = cls.initial(domain, isotropic=isotropic, max_aspect=max_aspect,
-                                    monitor=mbo_monitor)
+                                    monitor=mbo_monitor, size=size)
             else:
                 field = field.transferred(domain)
             resume = restore(field.q.function_space) if finest and restore else None
@@ -244,6 +252,7 @@ class FrameField:
             pin_radius=pin_radius,
             max_aspect=self.max_aspect, boundary_angles=self.boundary_angles,
             constraints=self.constraints,  # the MBO field's: fixed rows, directions, masses once
+            size=self.size,
         )
         self.result = solvers.solve(self.problem, max_it=max_it, monitor=monitor,
                                    options_prefix=options_prefix, checkpoint=checkpoint,

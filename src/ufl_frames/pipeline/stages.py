@@ -12,6 +12,7 @@ both stages start from the same :class:`~ufl_frames.param.cut.CutMesh`. Each sta
 collective and returns a frozen record whose measures are the same on every rank.
 """
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -127,7 +128,24 @@ def parametrise(source, quad_size: float | None = None) -> Parametrised:
     return Parametrised(quality=quality, parametrisation=kept)
 
 
-def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
+def quad_size_for_count(mesh, quads: float) -> float:
+    """The mean quad edge length (as :func:`~ufl_frames.param.seamless.scale_for_quad_size`
+    means it) at which the field's grid has about ``quads`` cells
+    (:func:`~ufl_frames.param.seamless.scale_for_quad_count`) on the cut mesh ``mesh``."""
+    from ufl_frames.param import seamless
+
+    return seamless.scale_for_quad_size(mesh, 1.0) / seamless.scale_for_quad_count(mesh, quads)
+
+
+#: With a quad count asked for, the quads are made again at a corrected size (at most this
+#: many times) while their number is off by more than :data:`COUNT_TOLERANCE`: the grid's
+#: count s² ∫ 1/(l1 l2) is what the integer layout rounds, not what it makes.
+COUNT_CORRECTIONS = 2
+COUNT_TOLERANCE = 0.05
+
+
+def quadrangulate(source, quad_size: float | None = None,
+                  quad_count: int | None = None) -> QuadMeshed:
     """The quad mesh of a field (:mod:`ufl_frames.quads`), on rank 0 (collective): the
     seamless map's T-mesh with integer arc lengths and its patches' grids
     (:func:`~ufl_frames.quads.patches.quads_of_map`), or where that fails or its worst quad
@@ -141,6 +159,7 @@ def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
             :class:`RootField` of one (shared with :func:`parametrise`).
         quad_size: the quads' target mean edge length (default: the triangles' mean edge
             length, about one quad per two triangles).
+        quad_count: about this many quads instead (:func:`quad_size_for_count`).
 
     Returns:
         The mesh and its measures (:func:`~ufl_frames.quads.measures.quad_quality`, with
@@ -156,8 +175,23 @@ def quadrangulate(source, quad_size: float | None = None) -> QuadMeshed:
 
     root = _root(source)
     size = mean_cell_edge(root.domain.mesh) if quad_size is None else float(quad_size)
-    kept, quality = root.on_root(lambda mesh: _quad_mesh_or_advice(mesh, size),
-                                 "cannot make quads of this field")
+
+    def work(mesh):
+        if quad_count is None:
+            return _quad_mesh_or_advice(mesh, size)
+        chosen = quad_size_for_count(mesh, quad_count)
+        kept = _quad_mesh_or_advice(mesh, chosen)
+        for _ in range(COUNT_CORRECTIONS):  # the integer layout rounds the grid's count
+            found = kept[1]["quads"]
+            if abs(found - quad_count) <= COUNT_TOLERANCE * quad_count:
+                break
+            chosen *= math.sqrt(found / quad_count)
+            candidate = _quad_mesh_or_advice(mesh, chosen)
+            if abs(candidate[1]["quads"] - quad_count) < abs(found - quad_count):
+                kept = candidate
+        return kept
+
+    kept, quality = root.on_root(work, "cannot make quads of this field")
     return QuadMeshed(quality=quality, mesh=kept)
 
 

@@ -173,6 +173,12 @@ class GaussNewtonModel(ActiveSetRules):
     (``switch`` = τ, ``-frames_hessian hybrid``): Gauss–Newton, then the exact Hessian
     once |g| ≤ τ |g₀| (:meth:`_switch`), which ends Gauss–Newton's linear tail.
 
+    With a size target (``problem.size``) G also holds the size term's matrix
+    w H_s (Gauss–Newton, or with ``exact`` the second derivative of M), assembled from its
+    UFL form (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its
+    own: added to G on the 5N path, and as Tᵀ G_M T (a PtAP with the tangent basis) to the
+    lean model's R, whose kernel knows H alone.
+
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix. By default :class:`~.reduced_pc.ReducedFactorPC` inverts it in
     reduced tangent coordinates (:meth:`reduced_operator`); ``-tao_nls_pc_type`` /
@@ -196,7 +202,8 @@ class GaussNewtonModel(ActiveSetRules):
     #: The PETSc objects the model owns (destroyed by :meth:`free`).
     _OWNED = ("shell", "assembled", "unshifted", "gauss_newton", "unscale", "xhat",
               "work", "tangent", "normal", "curvature", "basis_matrix", "reduced_matrix",
-              "reduced_curvature", "absent", "lean_t", "lean_u", "lean_w", "product_vector")
+              "reduced_curvature", "absent", "lean_t", "lean_u", "lean_w", "product_vector",
+              "size_matrix", "reduced_size", "size_product")
 
     def __init__(self, problem: FrameProblem, template: PETSc.Vec,
                  damping: float = DEFAULT_DAMPING,
@@ -262,6 +269,22 @@ class GaussNewtonModel(ActiveSetRules):
         return make(self.problem.q, self.damping_weight, self.inverse_area,
                     algebra=self.problem.algebra)
 
+    def _size_form(self, exact: bool) -> fem.Form | None:
+        """The compiled form of the size term's matrix (None without a size target)."""
+        size = self.problem.size
+        if size is None:
+            return None
+        return fem.form(size.hessian_ufl(self.problem.q, exact))
+
+    def _assemble_size(self) -> None:
+        """The size term's matrix at the current q, in x (W⁻¹ G_M W⁻¹)."""
+        if self.size_matrix is None:
+            return
+        self.size_matrix.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(self.size_matrix, self.size_form)
+        self.size_matrix.assemble()
+        self.size_matrix.diagonalScale(self.unscale, self.unscale)
+
     def _create(self, template: PETSc.Vec) -> None:
         problem = self.problem
         mesh = problem.q.function_space.mesh
@@ -274,6 +297,9 @@ class GaussNewtonModel(ActiveSetRules):
             self.reduced_space = fem.functionspace(mesh, ("Lagrange", 1, (columns,)))
         self.product_form, self.direction = None, None  # see _model_product
         self.form = self._model_form(self.exact)
+        self.size_form = self._size_form(self.exact)
+        if self.size_form is not None:
+            self.size_matrix = dolfinx.fem.petsc.create_matrix(self.size_form)
         if self.lean:
             self.reduced_matrix = dolfinx.fem.petsc.create_matrix(self.form)
         else:
@@ -316,11 +342,15 @@ class GaussNewtonModel(ActiveSetRules):
         ratio = 1.0 if gnorm is None else min(1.0, gnorm / self.gnorm0)
         self.lam = self.damping * self.adaptation * max(self.damping_min, ratio) * scale
         self.damping_weight.value = self.lam
+        self._assemble_size()
         if not self.lean:  # the lean model assembles Tᵀ G T in _build_reduced instead
             G.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix(G, self.form)
             G.assemble()
             G.diagonalScale(self.unscale, self.unscale)
+            if self.size_matrix is not None:
+                G.axpy(1.0, self.size_matrix,
+                       structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         return self._assemble_tangent(result, evaluation)
 
     def _assemble_tangent(self, result, evaluation: Evaluation):
@@ -337,8 +367,11 @@ class GaussNewtonModel(ActiveSetRules):
         if self.exact:
             self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
                                                                evaluation.gradient_x)
-            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H.
-            self.sphere = manifold.sphere_curvature(evaluation.energy)
+            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H
+            # (x·∇M = 0: the size misfit is homogeneous of degree 0).
+            H = evaluation.energy if evaluation.integrability is None \
+                else evaluation.integrability
+            self.sphere = manifold.sphere_curvature(H)
         if self.lean:  # only the reduced matrix: no 5N × 5N pre-matrix, no copy of it
             self.mu = None  # from trace(Tᵀ G T), as the 5N path's trace(P G P) / trace(P)
             self._build_reduced()
@@ -444,6 +477,11 @@ class GaussNewtonModel(ActiveSetRules):
             R.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix(R, self.form)
             R.assemble()
+            if self.size_matrix is not None:  # Tᵀ G_M T: the kernel knows H alone
+                self.reduced_size = _ptap(self.size_matrix, self.basis_matrix,
+                                          self.reduced_size)
+                R.axpy(1.0, self.reduced_size,
+                       structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         else:
             self.reduced_matrix = _ptap(self.gauss_newton, self.basis_matrix,
                                         self.reduced_matrix)
@@ -510,6 +548,7 @@ class GaussNewtonModel(ActiveSetRules):
 
     def _use_exact(self) -> None:
         self.exact, self.form = True, self._model_form(True)
+        self.size_form = self._size_form(True)
 
     def update(self, tao, x, H, P):
         """TAO Hessian callback at x (TAO has just evaluated the gradient there): adapts the
@@ -566,6 +605,11 @@ class GaussNewtonModel(ActiveSetRules):
         dolfinx.fem.petsc.assemble_vector(b, self.product_form[1])
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         y.pointwiseMult(b, self.unscale)  # y = W⁻¹ G_q W⁻¹ v
+        if self.size_matrix is not None:  # + W⁻¹ G_M W⁻¹ v, the size term's
+            if self.size_product is None:
+                self.size_product = y.duplicate()
+            self.size_matrix.mult(v, self.size_product)
+            y.axpy(1.0, self.size_product)
 
     def assemble(self, gnorm: float | None = None) -> None:
         """The model at the problem's current q, from its :meth:`~FrameProblem.evaluation`
