@@ -107,7 +107,7 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -
     n = patches.integer_lengths(lay)
     row["lengths s"] = time.perf_counter() - t
     t = time.perf_counter()
-    quad_mesh = patches.patch_quads(lay, n)
+    quad_mesh, _ = patches.patch_quads(lay, n)
     row["quads s"] = time.perf_counter() - t
     t = time.perf_counter()
     quad_mesh, _ = _improved(quad_mesh)

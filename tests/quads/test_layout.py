@@ -199,8 +199,8 @@ def test_a_folded_map_is_reported_or_untangled():
     folded = seamless.parametrisation(mesh, uv, 3.3)
     lay = layout.layout(folded)
     assert np.array_equal(lay.folded, np.flatnonzero(seamless.folded(folded)))
-    quads = patches.patch_quads(lay, patches.integer_lengths(lay))
-    assert lay.unlocated == 0  # the patch's points walked around the fold
+    quads, unlocated = patches.patch_quads(lay, patches.integer_lengths(lay))
+    assert unlocated == 0  # the patch's points walked around the fold
     assert check_quad_mesh(quads.points, quads.quads, area=3.0, rtol=1e-3) == []
 
 
@@ -296,7 +296,7 @@ def test_four_singularities_in_a_disk_line_up_by_collapsing_thin_patches():
     assert patches.integer_lengths(lay, collapse_below=0).min() >= 1
     n = patches.integer_lengths(lay)
     assert np.all(n[thin] == 0) and np.all(n[~thin] >= 1)
-    quads = patches.patch_quads(lay, n)
+    quads, _ = patches.patch_quads(lay, n)
     interior = quad_quality(quads.points, quads.quads)["interior_valence"]
     assert interior.get("3") == 4 and set(interior) == {"3", "4"}
     check_singular_layout(mesh, lay, quads, np.pi, rtol=0.02)
@@ -483,5 +483,5 @@ def test_a_singular_vertex_near_the_boundary(sign, s, monkeypatch):
         monkeypatch.setattr(patches, "FAN_ANGLES", (0.0, 360.0))  # any fan
         n = patches.integer_lengths(lay)
         assert n[to_side[0]] == 0
-        glued = patches.patch_quads(lay, n)
+        glued, _ = patches.patch_quads(lay, n)
         assert quad_quality(glued.points, glued.quads)["min_sj"] < 0.05

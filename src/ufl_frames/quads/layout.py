@@ -59,7 +59,7 @@ class Arc:
     curve: bool = False
 
 
-@dataclass
+@dataclass(frozen=True)
 class Layout:
     """The T-mesh: ``arcs``; ``nodes`` (their keys); ``patches``, each its four sides
     counter-clockwise, a side a list of half-arcs (2 a: arc a forwards, 2 a + 1

@@ -35,6 +35,7 @@ more connected components: each has its own patches).
 """
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -397,11 +398,11 @@ def _walk_point(mc, state):
     return tuple(sum(lam[i] * x[i][c] for i in range(3)) / sum(lam) for c in range(2))
 
 
-def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
+def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
     """The quads of every patch of ``lay`` for the integer arc lengths ``n``
-    (:func:`integer_lengths`; see the module text, step 2). A point whose walk gets lost
-    in a fold of the map (one that no trace crosses) is walked to again from the patch's
-    corner, else placed where the walk was; ``lay.unlocated`` counts those."""
+    (:func:`integer_lengths`; see the module text, step 2), and how many points could not
+    be located: a point whose walk gets lost in a fold of the map (one that no trace
+    crosses) is walked to again from the patch's corner, else placed where the walk was."""
     mc = lay.motorcycles
     pts = _Points(lay, n)
     position = [None] * pts.count
@@ -466,7 +467,6 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
         g = grid
         quads.append(np.stack([g[:-1, :-1], g[1:, :-1], g[1:, 1:], g[:-1, 1:]],
                               axis=-1).reshape(-1, 4))
-    lay.unlocated = lost
     if not quads:
         raise LayoutError("no quads at this size (every patch collapses): take a smaller "
                           "quad size")
@@ -495,7 +495,7 @@ def patch_quads(lay: Layout, n: np.ndarray) -> QuadMesh:
     pairs, counts = np.unique(np.minimum(a, b) * m + np.maximum(a, b), return_counts=True)
     once = pairs[counts == 1]
     return QuadMesh(points=points, quads=quads, chains={},
-                    boundary=np.stack([once // m, once % m], axis=1))
+                    boundary=np.stack([once // m, once % m], axis=1)), lost
 
 
 def quads_of_map(param: Parametrisation,
@@ -509,6 +509,7 @@ def quads_of_map(param: Parametrisation,
     if folds:
         param, _ = untangle(param)
     lay = layout(param)
-    lay.untangled = folds
     n = integer_lengths(lay, collapse_below=collapse_below)
-    return with_features(patch_quads(lay, n), param.mesh), lay, n
+    quad_mesh, lost = patch_quads(lay, n)
+    return (with_features(quad_mesh, param.mesh), replace(lay, untangled=folds, unlocated=lost),
+            n)
