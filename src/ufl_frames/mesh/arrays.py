@@ -2,10 +2,13 @@
 
 Rank 0 turns the Gmsh mesh into a :class:`MeshArrays`: the nodes the triangles use,
 counter-clockwise P1 triangles (second-order ones split into four, quadrilaterals into
-two), the boundary edges with the curve each lies on and every edge once; planarity,
-degenerate triangles, overlaps and slits are refused with a
-:class:`~ufl_frames.mesh.domain.GeometryError`. The boundary's corners and the cross
-angles of the CAD curves' tangents come from the same arrays.
+two), the boundary edges with the curve each lies on and every edge once, and the model
+entities beside them: the surface of every triangle, the interior edges on curves
+(interfaces between surfaces, curves embedded in a surface), the nodes at model points
+and the physical groups; planarity, degenerate triangles, overlaps and slits are refused
+with a :class:`~ufl_frames.mesh.domain.GeometryError`. The boundary's corners, the
+junctions of the interior curves and the cross angles of the CAD curves' tangents come
+from the same arrays.
 """
 
 import math
