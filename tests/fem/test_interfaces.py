@@ -119,3 +119,45 @@ def test_embedded_curve_aligns_the_field(tmp_path):
     worst = COMM.allreduce(float(np.abs(np.exp(4j * theta) - np.exp(4j * ANGLE)).max(
         initial=0.0)), op=MPI.MAX)
     assert worst > 0.1
+
+
+JUNCTION = (0.42, 0.24)  # off the centroid (0.5, 0.289), where a free field's singularity is
+
+
+def kites_of_a_triangle() -> str:
+    """Built-in kernel: the equilateral triangle (0, 0), (1, 0), (1/2, √3/2) cut into three
+    regions by the perpendiculars from :data:`JUNCTION` to its sides, which meet at 120°
+    there (and the sides at 90°)."""
+    r = math.sqrt(3)
+    g = np.array(JUNCTION)
+    b, along_bc, along_ca = np.array([1.0, 0.0]), np.array([-0.5, r / 2]), np.array([0.5, r / 2])
+    feet = [(g[0], 0.0), tuple(b + ((g - b) @ along_bc) * along_bc),
+            tuple((g @ along_ca) * along_ca)]
+    p = {1: (0, 0), 2: (1, 0), 3: (0.5, r / 2), 4: feet[0], 5: feet[1], 6: feet[2], 7: g}
+    lines = [f"Point({k}) = {{{float(x)!r}, {float(y)!r}, 0}};" for k, (x, y) in p.items()]
+    segments = {1: (1, 4), 2: (4, 2), 3: (2, 5), 4: (5, 3), 5: (3, 6), 6: (6, 1),
+                7: (7, 4), 8: (7, 5), 9: (7, 6)}
+    lines += [f"Line({k}) = {{{a}, {b}}};" for k, (a, b) in segments.items()]
+    lines += ["Curve Loop(1) = {1, -7, 9, 6}; Plane Surface(1) = {1};",
+              "Curve Loop(2) = {3, -8, 7, 2}; Plane Surface(2) = {2};",
+              "Curve Loop(3) = {5, -9, 8, 4}; Plane Surface(3) = {3};"]
+    return "\n".join(lines) + "\n"
+
+
+def test_three_interfaces_at_120_degrees_force_a_quarter_singularity(tmp_path):
+    domain = load(COMM, write(tmp_path, "kites.geo", kites_of_a_triangle()), 0.03)
+    inside = [j for j in domain.junctions if not j.on_boundary]
+    assert len(inside) == 1 and (inside[0].x, inside[0].y) == pytest.approx(JUNCTION)
+    assert inside[0].sectors == pytest.approx((2 * math.pi / 3,) * 3)
+    assert inside[0].index == 0.25
+    boundary = [j for j in domain.junctions if j.on_boundary]
+    assert len(boundary) == 3 and all(j.index == 0 for j in boundary)  # 90° at the sides
+    assert len(domain.corners) == 3
+    field = FrameField.initial(domain, isotropic=True)
+    check = field.index_theorem()
+    assert check["expected"] == 0.25 and check["agrees"]  # three 60° corners
+    assert check["junction_index"] == 0.25
+    # the field is aligned to the three interfaces: its one singularity is at the junction
+    assert [s["index"] for s in field.singularities] == [0.25]
+    (s,) = field.singularities
+    assert math.dist((s["x"], s["y"]), JUNCTION) < 0.03
