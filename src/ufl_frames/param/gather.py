@@ -75,7 +75,7 @@ def gather_features(domain, root: int = 0):
         entities = tags.indices[keep].astype(np.int32)
         mesh.topology.create_connectivity(dim, 2)
         geometry = dolfinx.mesh.entities_to_geometry(mesh, dim, entities)
-        return (ids[np.asarray(geometry).reshape(entities.size, -1)[:, :dim + 1]],
+        return (ids[np.asarray(geometry).reshape(-1, dim + 1)],  # P1: the entity's vertices
                 tags.values[keep].astype(np.int64))
 
     region = np.zeros(owned, dtype=np.int64)
