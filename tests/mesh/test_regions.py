@@ -317,3 +317,19 @@ $EndElements
     assert COMM.allreduce(int(np.count_nonzero(domain.facet_tags.values == NO_CURVE)),
                           op=MPI.SUM) > 0  # the boundary is there, on no curve
     assert domain.junctions == ()
+
+
+def test_refined_meshes_keep_regions_curves_and_points(tmp_path):
+    """The meshes of nested iteration (Gmsh's refinement) keep every entity: the hole
+    file refined once has the same regions' areas and interface length, and its points."""
+    path = write(tmp_path, "hole.geo", HOLE)
+    coarse = load(COMM, path, 0.4)  # refinements=1 meshes at twice the size, then splits
+    fine = load(COMM, path, 0.2, refinements=1)
+    assert fine.num_cells == 4 * coarse.num_cells
+    assert sorted(region_areas(fine).values()) == pytest.approx([0.75, 1.0], rel=1e-10)
+    _, inside = curve_lengths(fine)
+    assert sum(inside.values()) == pytest.approx(1.0, rel=1e-10)
+    points, before = tagged_points(fine), tagged_points(coarse)
+    assert sorted(points) == sorted(before) and len(points) == 10
+    assert np.allclose([points[k] for k in before], list(before.values()), rtol=0, atol=1e-12)
+    assert len(fine.junctions) == 2
