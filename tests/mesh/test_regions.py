@@ -333,3 +333,29 @@ def test_refined_meshes_keep_regions_curves_and_points(tmp_path):
     assert sorted(points) == sorted(before) and len(points) == 10
     assert np.allclose([points[k] for k in before], list(before.values()), rtol=0, atol=1e-12)
     assert len(fine.junctions) == 2
+
+
+def test_an_embedded_curve_from_the_boundary_is_no_slit(tmp_path):
+    """A crack path embedded from a boundary point into the surface (built-in kernel)
+    stays interior: not cut open, no corner where it leaves the boundary, a boundary
+    junction whose two sectors split the straight angle."""
+    text = """Point(1) = {0, 0, 0}; Point(2) = {2, 0, 0}; Point(3) = {2, 1, 0};
+Point(4) = {0, 1, 0}; Point(5) = {1, 0, 0}; Point(6) = {1.3, 0.5, 0};
+Line(1) = {1, 5}; Line(2) = {5, 2}; Line(3) = {2, 3}; Line(4) = {3, 4}; Line(5) = {4, 1};
+Curve Loop(1) = {1, 2, 3, 4, 5}; Plane Surface(1) = {1};
+Line(6) = {5, 6};
+Curve{6} In Surface{1};
+"""
+    domain = load(COMM, write(tmp_path, "crack.geo", text), 0.1)
+    assert domain.euler_characteristic == 1 and domain.notes == ()
+    assert area(domain) == pytest.approx(2.0, rel=1e-12)
+    outside, inside = curve_lengths(domain)
+    assert inside == pytest.approx({6: math.hypot(0.3, 0.5)}, rel=1e-10)
+    assert sum(outside.values()) == pytest.approx(6.0, rel=1e-10)
+    assert len(domain.corners) == 4
+    at = {(round(j.x, 9), round(j.y, 9)): j for j in domain.junctions}
+    assert sorted(at) == [(1.0, 0.0), (1.3, 0.5)]
+    foot = at[(1.0, 0.0)]
+    assert foot.on_boundary
+    assert foot.sectors == pytest.approx((math.atan2(0.5, 0.3), math.pi - math.atan2(0.5, 0.3)))
+    assert foot.index == 0 and at[(1.3, 0.5)].index == 0
