@@ -359,3 +359,35 @@ Curve{6} In Surface{1};
     assert foot.on_boundary
     assert foot.sectors == pytest.approx((math.atan2(0.5, 0.3), math.pi - math.atan2(0.5, 0.3)))
     assert foot.index == 0 and at[(1.3, 0.5)].index == 0
+
+
+def test_a_msh_file_keeps_its_regions_interface_and_groups(tmp_path):
+    """A ``.msh`` Gmsh wrote from the two-region file (MSH 4.1, with its entities): the
+    same regions, interface, points and named groups as the ``.geo``."""
+    import gmsh
+
+    path = tmp_path / "two.msh"
+    if COMM.rank == 0:
+        (tmp_path / "two.geo").write_text(TWO_REGIONS)
+        gmsh.initialize(argv=[], readConfigFiles=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.merge(str(tmp_path / "two.geo"))
+            gmsh.option.setNumber("Mesh.MeshSizeMax", 0.2)
+            gmsh.option.setNumber("Mesh.SaveAll", 1)
+            gmsh.model.mesh.generate(2)
+            gmsh.write(str(path))
+        finally:
+            gmsh.finalize()
+    COMM.Barrier()
+    domain = load(COMM, path)
+    areas = region_areas(domain)
+    assert sorted(areas) == [1, 2]
+    assert list(areas.values()) == pytest.approx([1.0, 1.0], rel=1e-10)
+    outside, inside = curve_lengths(domain)
+    assert inside == pytest.approx({2: 1.0}, rel=1e-10)
+    assert sum(outside.values()) == pytest.approx(6.0, rel=1e-10)
+    assert len(tagged_points(domain)) == 6
+    assert {(g.dim, g.tag, g.name) for g in domain.physical_groups} == {
+        (0, 21, "origin"), (1, 11, "inlet"), (1, 12, "interface"), (2, 5, "iron"),
+        (2, 6, "copper")}
