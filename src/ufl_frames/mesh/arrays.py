@@ -285,11 +285,12 @@ def _model_point_rows(tags: np.ndarray, new_row: np.ndarray):
     """(rows, point tags) of the mesh nodes on the model's points (0D entities) that the
     triangles use; ``tags`` are the Gmsh node tags of the uncompressed rows, ``new_row``
     their compressed rows (−1: unused)."""
-    row_of_tag = {int(t): i for i, t in enumerate(tags)}
+    row_of_tag = np.full(int(tags.max(initial=0)) + 1, -1, dtype=np.int64)
+    row_of_tag[tags.astype(np.int64)] = np.arange(tags.size)
     rows, owner = [], []
     for _, point in gmsh.model.getEntities(0):
-        for t in gmsh.model.mesh.getNodes(0, point)[0]:
-            r = row_of_tag.get(int(t), -1)
+        for t in gmsh.model.mesh.getNodes(0, point)[0].astype(np.int64):
+            r = row_of_tag[t] if t < row_of_tag.size else -1
             if r >= 0 and new_row[r] >= 0:
                 rows.append(int(new_row[r]))
                 owner.append(int(point))

@@ -266,19 +266,26 @@ def _distribute(comm: MPI.Comm, arrays: MeshArrays | None, info: dict, source: s
     if comm.rank == 0:
         cells, x = arrays.cells, arrays.x
         facets, values = arrays.boundary, arrays.boundary_curve.astype(np.int32)
-        entities = {2: (cells, arrays.cell_surface),
-                    1: (arrays.curve_edges, arrays.edge_curve),
+        entities = {1: (arrays.curve_edges, arrays.edge_curve),
                     0: (arrays.point_nodes[:, None], arrays.point_tag)}
+        surface = arrays.cell_surface.astype(np.int32)
     else:
         cells, x = np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2))
         facets, values = np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int32)
         entities = {d: (np.zeros((0, d + 1), dtype=np.int64), np.zeros(0, dtype=np.int32))
-                    for d in (0, 1, 2)}
+                    for d in (0, 1)}
+        surface = None
     mesh = dolfinx.mesh.create_mesh(comm, cells, element, x)
     mesh.topology.create_connectivity(1, 2)
     tags = _meshtags(mesh, 1, facets, values, "boundary_curves")
     model = {d: _meshtags(mesh, d, *entities[d], name)
-             for d, name in ((2, "surfaces"), (1, "curves"), (0, "points"))}
+             for d, name in ((1, "curves"), (0, "points"))}
+    # the cells' surfaces: every rank reads those of its cells at their input index
+    surface = comm.bcast(surface, root=0)
+    original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
+    model[2] = dolfinx.mesh.meshtags(mesh, 2, np.arange(original.size, dtype=np.int32),
+                                     surface[original])
+    model[2].name = "surfaces"
     nodes, angles = info["directions"] if info["directions"] is not None else (None, None)
     return Domain(
         mesh=mesh,
