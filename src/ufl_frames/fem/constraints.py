@@ -10,6 +10,12 @@ Boundary orientation. At a boundary vertex one branch is aligned with the normal
 The normal is averaged in the 4-fold representation, e^{4iψ}, over the adjacent
 boundary edges (weighted by length): at a right-angled corner both edges give the
 same cross, at other corners the average is the cross closest to both.
+
+Interior curves (interfaces between regions, curves embedded in a surface) hold the
+cross the same way at their vertices that are not on the boundary
+(:attr:`Fixed.PRESCRIBED`): one branch along the curve, averaged over the adjacent curve
+facets, or the CAD curve's exact tangent where given. A vertex where curves meet with no
+common cross (the 4-fold average vanishes: three curves at 120°) stays free.
 """
 
 import enum
@@ -134,6 +140,7 @@ def frame_constraints(
     max_aspect: float | None = DEFAULT_MAX_ASPECT,
     boundary_angles: np.ndarray | None = None,
     algebra: FrameAlgebra = ALGEBRA,
+    interior_facets: np.ndarray | None = None,
 ) -> FrameConstraints:
     """Boundary rows fixed to their normals, and lumped-mass weights, for the frame space
     ``V`` (collective).
@@ -148,44 +155,25 @@ def frame_constraints(
         max_aspect: The bound l_max/l_min of non-isotropic frames (None or ``math.inf``:
             none).
         boundary_angles: One angle per local row, NaN where unknown (e.g.
-            :meth:`ufl_frames.mesh.Domain.boundary_angles`).
+            :meth:`ufl_frames.mesh.Domain.boundary_angles`), at the boundary rows and at
+            the rows of ``interior_facets``.
         algebra: The frame algebra of ``V`` (a 2D one: the boundary normals are planar).
+        interior_facets: Local facets inside the domain the cross is aligned to
+            (:meth:`ufl_frames.mesh.Domain.interior_curve_facets`: interfaces, embedded
+            curves; each facet on one rank only); None: none.
 
     Returns:
-        The constraints, every boundary row fixed (:attr:`Fixed.BOUNDARY`).
+        The constraints, every boundary row fixed (:attr:`Fixed.BOUNDARY`), the other
+        rows of ``interior_facets`` after them (:attr:`Fixed.PRESCRIBED`).
     """
     mesh = V.mesh
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, tdim)
     mesh.topology.create_connectivity(tdim, tdim - 1)
     facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
-    rows = _vertex_rows_of_facets(V, facets)
-    x = V.tabulate_dof_coordinates()[:, :2]
-    edge = x[rows[:, 1]] - x[rows[:, 0]]
-    angle4 = 4 * np.arctan2(edge[:, 0], -edge[:, 1])  # normal (e_y, -e_x) up to sign
-    length = np.linalg.norm(edge, axis=1)
-
-    # Accumulate length-weighted e^{4iψ} at the vertices, summed across ranks.
     index_map = V.dofmap.index_map
-    acc = dolfinx.la.vector(index_map, 2)
-    values = acc.array.reshape(-1, 2)
-    for k in range(2):
-        np.add.at(values[:, 0], rows[:, k], length * np.cos(angle4))
-        np.add.at(values[:, 1], rows[:, k], length * np.sin(angle4))
-    marker = dolfinx.la.vector(index_map, 1)
-    np.add.at(marker.array, rows.ravel(), 1.0)
-    for vec in (acc, marker):
-        vec.scatter_reverse(dolfinx.la.InsertMode.add)
-        vec.scatter_forward()
-    boundary = np.flatnonzero(marker.array > 0).astype(np.int32)
-    c, s = values[boundary, 0], values[boundary, 1]
-    psi = np.arctan2(s, c) / 4
-    if boundary_angles is not None:
-        exact = np.asarray(boundary_angles, dtype=np.float64)[boundary]
-        psi = np.where(np.isfinite(exact), exact, psi)
-    normals = np.stack([np.cos(psi), np.sin(psi)], axis=1)
-
-    return FrameConstraints(
+    boundary, normals, _ = _facet_crosses(V, facets, boundary_angles)
+    constraints = FrameConstraints(
         fixed=boundary,
         directions=normals,
         kind=np.full(boundary.size, Fixed.BOUNDARY, dtype=np.int8),
@@ -196,6 +184,51 @@ def frame_constraints(
         max_aspect=algebra.aspect_bound(isotropic, max_aspect),
         algebra=algebra,
     )
+    if interior_facets is None:
+        return constraints
+    facets = np.asarray(interior_facets, dtype=np.int32)
+    rows, directions, agree = _facet_crosses(V, facets, boundary_angles)
+    keep = agree & ~np.isin(rows, boundary)
+    return constraints.with_fixed(rows[keep], directions[keep], Fixed.PRESCRIBED)
+
+
+def _facet_crosses(V, facets: np.ndarray, angles: np.ndarray | None):
+    """The crosses of the vertices of ``facets`` (collective): the length-weighted
+    average of e^{4iψ} of their facets' normals, summed across ranks, or the exact
+    ``angles`` where finite.
+
+    Returns:
+        (rows (nr,), unit directions (nr, 2), whether each has a cross (nr,): an exact
+        angle, or an average not cancelled out by facets of different crosses).
+    """
+    rows = _vertex_rows_of_facets(V, facets)
+    x = V.tabulate_dof_coordinates()[:, :2]
+    edge = x[rows[:, 1]] - x[rows[:, 0]]
+    angle4 = 4 * np.arctan2(edge[:, 0], -edge[:, 1])  # normal (e_y, -e_x) up to sign
+    length = np.linalg.norm(edge, axis=1)
+
+    # Accumulate length-weighted e^{4iψ} at the vertices, summed across ranks.
+    index_map = V.dofmap.index_map
+    acc = dolfinx.la.vector(index_map, 3)
+    values = acc.array.reshape(-1, 3)
+    for k in range(2):
+        np.add.at(values[:, 0], rows[:, k], length * np.cos(angle4))
+        np.add.at(values[:, 1], rows[:, k], length * np.sin(angle4))
+        np.add.at(values[:, 2], rows[:, k], length)
+    marker = dolfinx.la.vector(index_map, 1)
+    np.add.at(marker.array, rows.ravel(), 1.0)
+    for vec in (acc, marker):
+        vec.scatter_reverse(dolfinx.la.InsertMode.add)
+        vec.scatter_forward()
+    found = np.flatnonzero(marker.array > 0).astype(np.int32)
+    c, s, total = values[found, 0], values[found, 1], values[found, 2]
+    psi = np.arctan2(s, c) / 4
+    agree = np.hypot(c, s) > 1e-6 * total
+    if angles is not None:
+        exact = np.asarray(angles, dtype=np.float64)[found]
+        psi = np.where(np.isfinite(exact), exact, psi)
+        agree |= np.isfinite(exact)
+    return found, np.stack([np.cos(psi), np.sin(psi)], axis=1), agree
 
 
 def pin_singularities(V, constraints: FrameConstraints, q: np.ndarray,

@@ -1,9 +1,11 @@
 """Planar domains for frame-field computations, built or read with Gmsh.
 
 Every builder returns a :class:`Domain`: the distributed P1 triangle mesh
-(``gdim = 2``), its boundary facets tagged by the curve they lie on, the boundary
-directions and corners of the CAD model where one exists, the Euler characteristic,
-the mesh size actually used and notes on what the loader changed.
+(``gdim = 2``), its boundary facets tagged by the curve they lie on, its regions (the
+surface of every cell), the facets on model curves inside it (interfaces, embedded
+curves), the model points and the file's physical groups, the curve directions, corners
+and junctions of the CAD model where one exists, the Euler characteristic, the mesh size
+actually used and notes on what the loader changed.
 
 * :mod:`~ufl_frames.mesh.domain`: :class:`Domain`, :class:`Corner`, :class:`GeometryError`;
 * :mod:`~ufl_frames.mesh.builtin`: the built-in shapes :func:`annulus` and :func:`piano`;
@@ -36,6 +38,7 @@ _EXPORTS = {
     "KNOWN_GEOMETRIES": "builtin", "annulus": "builtin", "piano": "builtin",
     "piano_area": "builtin", "piano_perimeter": "builtin", "piano_points": "builtin",
     "Corner": "domain", "Domain": "domain", "GeometryError": "domain",
+    "Junction": "domain", "PhysicalGroup": "domain",
     "MeshTimeLimit": "domain", "load": "files", "mesh_time_limit": "files",
 }
 

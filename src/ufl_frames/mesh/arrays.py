@@ -2,10 +2,13 @@
 
 Rank 0 turns the Gmsh mesh into a :class:`MeshArrays`: the nodes the triangles use,
 counter-clockwise P1 triangles (second-order ones split into four, quadrilaterals into
-two), the boundary edges with the curve each lies on and every edge once; planarity,
-degenerate triangles, overlaps and slits are refused with a
-:class:`~ufl_frames.mesh.domain.GeometryError`. The boundary's corners and the cross
-angles of the CAD curves' tangents come from the same arrays.
+two), the boundary edges with the curve each lies on and every edge once, and the model
+entities beside them: the surface of every triangle, the interior edges on curves
+(interfaces between surfaces, curves embedded in a surface), the nodes at model points
+and the physical groups; planarity, degenerate triangles, overlaps and slits are refused
+with a :class:`~ufl_frames.mesh.domain.GeometryError`. The boundary's corners, the
+junctions of the interior curves and the cross angles of the CAD curves' tangents come
+from the same arrays.
 """
 
 import math
@@ -18,7 +21,14 @@ init_petsc()
 import gmsh  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ufl_frames.mesh.domain import NO_CURVE, Corner, GeometryError, lookup  # noqa: E402
+from ufl_frames.mesh.domain import (  # noqa: E402
+    NO_CURVE,
+    Corner,
+    GeometryError,
+    Junction,
+    PhysicalGroup,
+    lookup,
+)
 
 
 def surfaces() -> list[int]:
@@ -149,7 +159,10 @@ def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
 
 @dataclass
 class MeshArrays:
-    """The mesh on rank 0 as arrays (compressed to the nodes the triangles use)."""
+    """The mesh on rank 0 as arrays (compressed to the nodes the triangles use), with the
+    model entities it lies on: the surface of every triangle, the edges on model curves
+    (boundary, interfaces between surfaces, curves embedded in a surface) and the nodes at
+    model points, and the file's physical groups."""
 
     x: np.ndarray  # (n, 2)
     cells: np.ndarray  # (m, 3), counter-clockwise
@@ -157,6 +170,24 @@ class MeshArrays:
     boundary_curve: np.ndarray  # (k,) curve tag of each
     gmsh_node: np.ndarray  # (n,) Gmsh node tag of each row
     edges: np.ndarray  # (e, 2) every edge once, (lo, hi)
+    cell_surface: np.ndarray = None  # (m,) surface tag of each triangle
+    interior_curve_edges: np.ndarray = None  # (c, 2) interior edges on a curve, (lo, hi)
+    interior_curve: np.ndarray = None  # (c,) curve tag of each
+    point_nodes: np.ndarray = None  # (p,) rows at model points (a slit's end: both copies)
+    point_tag: np.ndarray = None  # (p,) the point tag of each
+    physical_groups: tuple = ()  # mesh.domain.PhysicalGroup records of the file
+
+    @property
+    def curve_edges(self) -> np.ndarray:
+        """Every edge on a model curve: the boundary ones (tagged), then the interior ones."""
+        tagged = self.boundary_curve != NO_CURVE
+        return np.concatenate([self.boundary[tagged], self.interior_curve_edges])
+
+    @property
+    def edge_curve(self) -> np.ndarray:
+        """The curve tag of each of :attr:`curve_edges`."""
+        tagged = self.boundary_curve != NO_CURVE
+        return np.concatenate([self.boundary_curve[tagged], self.interior_curve])
 
 
 def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
@@ -193,6 +224,7 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
     new_row = np.full(int(tags.size), -1, dtype=np.int64)
     new_row[used] = np.arange(used.size)
     node_tags = tags[used]
+    point_nodes, point_tag = _model_point_rows(tags, new_row)
     slits = slit_curves()
     if slits and curve_edges.size:
         on_slit = np.isin(curves, list(slits))
@@ -206,6 +238,7 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
         x, cells, node_tags = x[copy_of], cracked, node_tags[copy_of]
         # a curve's edges name the old nodes: on the slits, map them to both copies
         curve_edges, curves = _edges_on_copies(curve_edges, curves, new_row, copy_of)
+        point_nodes, point_tag = _rows_on_copies(point_nodes, point_tag, copy_of)
         new_row = np.arange(copy_of.size)
         tags = np.arange(copy_of.size)
 
@@ -223,6 +256,8 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
     own_cell = first[counts == 1] % cells.shape[0]
     # Curve of each boundary edge, from the 1D elements (map their nodes to rows first).
     boundary_curve = np.full(boundary.shape[0], NO_CURVE, dtype=np.int64)
+    interior_keys = unique[counts == 2]
+    interior_curve = np.zeros(0, dtype=np.int64)
     if curve_edges.size:
         mapped = new_row[curve_edges]
         ok = np.all(mapped >= 0, axis=1)
@@ -231,9 +266,57 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
         curve_keys, curve_of = curve_keys[order], curves[ok][order]
         found = lookup(curve_keys, curve_of.astype(float), _edge_keys(boundary, n))
         boundary_curve = np.where(np.isnan(found), NO_CURVE, found).astype(np.int64)
+        # interfaces and embedded curves: mesh edges of two triangles on a curve
+        found = lookup(curve_keys, curve_of.astype(float), interior_keys)
+        interior_keys = interior_keys[np.isfinite(found)]
+        interior_curve = found[np.isfinite(found)].astype(np.int64)
+    else:
+        interior_keys = interior_keys[:0]
     _check_conforming(source, x, cells, boundary, cell_surface, own_cell)
     return MeshArrays(x=x, cells=cells, boundary=boundary, boundary_curve=boundary_curve,
-                      gmsh_node=node_tags, edges=mesh_edges)
+                      gmsh_node=node_tags, edges=mesh_edges, cell_surface=cell_surface,
+                      interior_curve_edges=np.stack([interior_keys // n, interior_keys % n],
+                                                    axis=1),
+                      interior_curve=interior_curve, point_nodes=point_nodes,
+                      point_tag=point_tag, physical_groups=physical_groups())
+
+
+def _model_point_rows(tags: np.ndarray, new_row: np.ndarray):
+    """(rows, point tags) of the mesh nodes on the model's points (0D entities) that the
+    triangles use; ``tags`` are the Gmsh node tags of the uncompressed rows, ``new_row``
+    their compressed rows (−1: unused)."""
+    row_of_tag = np.full(int(tags.max(initial=0)) + 1, -1, dtype=np.int64)
+    row_of_tag[tags.astype(np.int64)] = np.arange(tags.size)
+    rows, owner = [], []
+    for _, point in gmsh.model.getEntities(0):
+        for t in gmsh.model.mesh.getNodes(0, point)[0].astype(np.int64):
+            r = row_of_tag[t] if t < row_of_tag.size else -1
+            if r >= 0 and new_row[r] >= 0:
+                rows.append(int(new_row[r]))
+                owner.append(int(point))
+    return np.array(rows, dtype=np.int64), np.array(owner, dtype=np.int64)
+
+
+def _rows_on_copies(rows: np.ndarray, values: np.ndarray, copy_of: np.ndarray):
+    """``rows`` (with their ``values``) in the cracked numbering: every copy of each."""
+    order = np.argsort(copy_of, kind="stable")
+    start = np.searchsorted(copy_of[order], rows, side="left")
+    stop = np.searchsorted(copy_of[order], rows, side="right")
+    new = [order[a:b] for a, b in zip(start, stop, strict=True)]
+    counts = np.array([part.size for part in new], dtype=np.int64)
+    out = np.concatenate(new) if new else np.zeros(0, dtype=np.int64)
+    return out.astype(np.int64), np.repeat(values, counts)
+
+
+def physical_groups() -> tuple[PhysicalGroup, ...]:
+    """The current model's physical groups, by dimension and number."""
+    groups = []
+    for dim, tag in sorted(gmsh.model.getPhysicalGroups()):
+        entities = gmsh.model.getEntitiesForPhysicalGroup(dim, tag)
+        groups.append(PhysicalGroup(dim=int(dim), tag=int(tag),
+                                    name=gmsh.model.getPhysicalName(dim, tag),
+                                    entities=tuple(sorted(int(e) for e in entities))))
+    return tuple(groups)
 
 
 def _edges_on_copies(curve_edges, curves, new_row, copy_of):
@@ -309,19 +392,34 @@ def interior_angles(x, cells, n) -> np.ndarray:
 
 
 def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
-    """Cross angles ψ at the boundary nodes from the curves' tangents, and the corners.
+    """Cross angles ψ at the nodes on model curves from the curves' tangents, the
+    boundary's corners and the junctions of the curves inside the domain.
 
     At a node inside a curve ψ is the tangent's angle there; at a geometric point the
     crosses of the curves meeting there are averaged in the 4-fold representation
-    e^{4iψ} and the interior angle is the angle between the curves' outgoing tangents
-    (on the side the mesh says, for reflex corners)."""
-    boundary_nodes = np.unique(arrays.boundary)
+    e^{4iψ} (on the boundary those of the boundary curves only: the boundary's cross
+    wins over an interface's) and the interior angle is the angle between the boundary
+    curves' outgoing tangents (on the side the mesh says, for reflex corners). A point
+    where interior curves (interfaces, embedded curves) end, turn or meet is a
+    :class:`~ufl_frames.mesh.domain.Junction`; a boundary point that only interior curves
+    meet is no corner.
+
+    Returns:
+        (ψ (n,) with NaN where the model gives none, corners, junctions).
+    """
+    n = arrays.x.shape[0]
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[arrays.boundary.ravel()] = True
+    interior_edges = _or_empty(arrays.interior_curve_edges)
+    interior_tags = _or_empty(arrays.interior_curve, (0,))
+    curve_nodes = np.unique(np.concatenate([arrays.boundary.ravel(), interior_edges.ravel()]))
     rows_of_tag: dict[int, list[int]] = {}  # a node cut open along a slit has two rows
-    for row in boundary_nodes:
+    for row in curve_nodes:
         rows_of_tag.setdefault(int(arrays.gmsh_node[row]), []).append(int(row))
-    psi = np.full(arrays.x.shape[0], np.nan)
-    curves = sorted({int(c) for c in arrays.boundary_curve if c != NO_CURVE})
-    for curve in curves:
+    psi = np.full(n, np.nan)
+    boundary_curves = {int(c) for c in arrays.boundary_curve if c != NO_CURVE}
+    interior_curves = {int(c) for c in interior_tags} - boundary_curves
+    for curve in sorted(boundary_curves | interior_curves):
         tags, _, param = gmsh.model.mesh.getNodes(1, curve, includeBoundary=False,
                                                   returnParametricCoord=True)
         if not tags.size or param.size != tags.size:
@@ -330,8 +428,7 @@ def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
         for t, (dx, dy, _) in zip(tags, d, strict=True):
             if math.hypot(dx, dy) > 0:
                 psi[rows_of_tag.get(int(t), [])] = math.atan2(dy, dx)
-    corners = []
-    curve_set = set(curves)
+    corners, junctions = [], []
     for _, point in gmsh.model.getEntities(0):
         tags = gmsh.model.mesh.getNodes(0, point)[0]
         if tags.size != 1 or int(tags[0]) not in rows_of_tag:
@@ -343,34 +440,85 @@ def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
                         if round(mesh_angle[r] / (math.pi / 2)) != 2]
             continue
         node = rows[0]
-        xyz = gmsh.model.getValue(0, point, [])
-        outgoing = []
-        for curve in gmsh.model.getAdjacencies(0, point)[0]:
-            if int(curve) not in curve_set:
-                continue
-            lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, int(curve)))
-            for end, sign in ((lo, 1.0), (hi, -1.0)):
-                at = gmsh.model.getValue(1, int(curve), [end])
-                if math.dist(at[:2], xyz[:2]) > 1e-9 * max(1.0, math.hypot(*xyz[:2])):
-                    continue
-                t = gmsh.model.getDerivative(1, int(curve), [end])
-                if math.hypot(t[0], t[1]) > 0:
-                    outgoing.append((sign * t[0], sign * t[1]))
-        if not outgoing:
+        outer = _outgoing(point, boundary_curves)
+        inner = _outgoing(point, interior_curves)
+        here = (float(arrays.x[node, 0]), float(arrays.x[node, 1]))
+        if not on_boundary[node]:
+            z = sum(np.exp(4j * math.atan2(ty, tx)) for tx, ty in inner)
+            if inner and abs(z) > 1e-9 * len(inner):
+                psi[node] = np.angle(z) / 4
+            sectors = _sectors(inner, None)
+            if sectors and not (len(sectors) == 2 and abs(sectors[0] - math.pi) < 1e-6):
+                junctions.append(Junction(*here, sectors=sectors, on_boundary=False))
             continue
-        z = sum(np.exp(4j * math.atan2(ty, tx)) for tx, ty in outgoing)
-        if abs(z) > 1e-9 * len(outgoing):
+        if not outer:
+            continue
+        z = sum(np.exp(4j * math.atan2(ty, tx)) for tx, ty in outer)
+        if abs(z) > 1e-9 * len(outer):
             psi[node] = np.angle(z) / 4
-        if len(outgoing) == 1:  # a slit's tip: the boundary turns back, a full turn
-            corners.append(Corner(float(arrays.x[node, 0]), float(arrays.x[node, 1]),
-                                  float(mesh_angle[node])))
-        if len(outgoing) == 2:
-            (ax, ay), (bx, by) = outgoing
+        if len(outer) == 1:  # a slit's tip: the boundary turns back, a full turn
+            corners.append(Corner(*here, float(mesh_angle[node])))
+        if len(outer) == 2:
+            (ax, ay), (bx, by) = outer
             theta = math.atan2(abs(ax * by - ay * bx), ax * bx + ay * by)
             angle = min((theta, 2 * math.pi - theta), key=lambda a: abs(a - mesh_angle[node]))
             if abs(angle - math.pi) > 1e-6:
-                corners.append(Corner(float(arrays.x[node, 0]), float(arrays.x[node, 1]), angle))
-    return psi, corners
+                corners.append(Corner(*here, angle))
+            if inner:
+                sectors = _sectors(outer + inner, _first_boundary_ray(arrays, node, outer))
+                if sectors:
+                    junctions.append(Junction(*here, sectors=sectors, on_boundary=True))
+    return psi, corners, junctions
+
+
+def _or_empty(values, shape=(0, 2)) -> np.ndarray:
+    return np.zeros(shape, dtype=np.int64) if values is None else values
+
+
+def _outgoing(point: int, curves: set[int]) -> list[tuple[float, float]]:
+    """The tangents (x, y) of ``curves`` leaving the model point ``point`` (one per end of
+    a curve there: a closed curve through it gives two)."""
+    xyz = gmsh.model.getValue(0, point, [])
+    out = []
+    for curve in gmsh.model.getAdjacencies(0, point)[0]:
+        if int(curve) not in curves:
+            continue
+        lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, int(curve)))
+        for end, sign in ((lo, 1.0), (hi, -1.0)):
+            at = gmsh.model.getValue(1, int(curve), [end])
+            if math.dist(at[:2], xyz[:2]) > 1e-9 * max(1.0, math.hypot(*xyz[:2])):
+                continue
+            t = gmsh.model.getDerivative(1, int(curve), [end])
+            if math.hypot(t[0], t[1]) > 0:
+                out.append((sign * t[0], sign * t[1]))
+    return out
+
+
+def _first_boundary_ray(arrays: MeshArrays, node: int, outer) -> int:
+    """Which of the two boundary tangents ``outer`` at a boundary ``node`` runs along the
+    boundary edge that leaves it (the domain on its left)."""
+    edge = arrays.boundary[arrays.boundary[:, 0] == node]
+    if not edge.size:
+        return 0
+    d = arrays.x[edge[0, 1]] - arrays.x[node]
+    return int(np.argmax([tx * d[0] + ty * d[1] for tx, ty in outer]))
+
+
+def _sectors(rays, first: int | None) -> tuple[float, ...]:
+    """The angles between consecutive ``rays`` counter-clockwise: all around (``first``
+    None: a point inside the domain), or from ray ``first`` (a boundary tangent) to the
+    other boundary ray, ``rays[0]`` or ``rays[1]`` (a point on the boundary)."""
+    if not rays:
+        return ()
+    angles = np.array([math.atan2(ty, tx) for tx, ty in rays])
+    start = angles[0 if first is None else first]
+    turn = np.mod(angles - start, 2 * math.pi)
+    if first is None:
+        turn = np.sort(turn)
+        return tuple(float(a) for a in np.diff(np.append(turn, 2 * math.pi)))
+    end = turn[1 - first]
+    inside = np.sort(turn[(turn > 0) & (turn < end)])
+    return tuple(float(a) for a in np.diff(np.concatenate([[0.0], inside, [end]])))
 
 
 def mesh_corners(arrays: MeshArrays, mesh_angle: np.ndarray) -> list[Corner]:

@@ -127,8 +127,9 @@ def _gmsh_session(make, source: str, cad: bool):
         requested = make(notes)
         arrays = mesh_arrays(source, notes)
         mesh_angle = interior_angles(arrays.x, arrays.cells, arrays.x.shape[0])
+        junctions = ()
         if cad:
-            psi, corners = cad_directions(arrays, mesh_angle)
+            psi, corners, junctions = cad_directions(arrays, mesh_angle)
             nodes = np.flatnonzero(np.isfinite(psi)).astype(np.int64)
             directions = (nodes, psi[nodes])
         else:
@@ -140,6 +141,8 @@ def _gmsh_session(make, source: str, cad: bool):
             "h": mean_edge_length(arrays),
             "notes": tuple(notes),
             "directions": directions,
+            "junctions": tuple(junctions),
+            "groups": arrays.physical_groups,
         }
         return arrays, info
     except GeometryError:
@@ -263,16 +266,26 @@ def _distribute(comm: MPI.Comm, arrays: MeshArrays | None, info: dict, source: s
     if comm.rank == 0:
         cells, x = arrays.cells, arrays.x
         facets, values = arrays.boundary, arrays.boundary_curve.astype(np.int32)
+        entities = {1: (arrays.curve_edges, arrays.edge_curve),
+                    0: (arrays.point_nodes[:, None], arrays.point_tag)}
+        surface = arrays.cell_surface.astype(np.int32)
     else:
         cells, x = np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2))
         facets, values = np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int32)
+        entities = {d: (np.zeros((0, d + 1), dtype=np.int64), np.zeros(0, dtype=np.int32))
+                    for d in (0, 1)}
+        surface = None
     mesh = dolfinx.mesh.create_mesh(comm, cells, element, x)
-    local, local_values = dolfinx.io.distribute_entity_data(mesh, 1, facets, values)
     mesh.topology.create_connectivity(1, 2)
-    tags = dolfinx.mesh.meshtags_from_entities(
-        mesh, 1, dolfinx.graph.adjacencylist(local), local_values.astype(np.int32, copy=False)
-    )
-    tags.name = "boundary_curves"
+    tags = _meshtags(mesh, 1, facets, values, "boundary_curves")
+    model = {d: _meshtags(mesh, d, *entities[d], name)
+             for d, name in ((1, "curves"), (0, "points"))}
+    # the cells' surfaces: every rank reads those of its cells at their input index
+    surface = comm.bcast(surface, root=0)
+    original = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)
+    model[2] = dolfinx.mesh.meshtags(mesh, 2, np.arange(original.size, dtype=np.int32),
+                                     surface[original])
+    model[2].name = "surfaces"
     nodes, angles = info["directions"] if info["directions"] is not None else (None, None)
     return Domain(
         mesh=mesh,
@@ -283,9 +296,29 @@ def _distribute(comm: MPI.Comm, arrays: MeshArrays | None, info: dict, source: s
         requested_mesh_size=info["requested"],
         source=source,
         notes=info["notes"],
+        physical_groups=info["groups"],
+        cell_tags=model[2],
+        curve_tags=model[1],
+        point_tags=model[0],
+        junctions=info["junctions"],
         _direction_nodes=nodes,
         _direction_angles=angles,
     )
+
+
+def _meshtags(mesh, dim: int, entities: np.ndarray, values: np.ndarray, name: str):
+    """MeshTags of dimension ``dim`` from rank 0's entities (rows of input node indices)
+    and their values (collective)."""
+    local, local_values = dolfinx.io.distribute_entity_data(
+        mesh, dim, np.ascontiguousarray(entities, dtype=np.int64),
+        np.ascontiguousarray(values, dtype=np.int32))
+    if dim > 0:
+        mesh.topology.create_connectivity(dim, 0)
+    tags = dolfinx.mesh.meshtags_from_entities(
+        mesh, dim, dolfinx.graph.adjacencylist(local.astype(np.int32)),
+        local_values.astype(np.int32, copy=False))
+    tags.name = name
+    return tags
 
 
 def _release(owns: bool, previous_model, saved: dict) -> None:

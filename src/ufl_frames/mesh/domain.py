@@ -46,6 +46,34 @@ class Corner:
 
 
 @dataclass(frozen=True)
+class Junction:
+    """A point where curves inside the domain (interfaces, embedded curves) end, turn or
+    meet each other or the boundary: position, the angles (radians) of the sectors
+    between consecutive curves counter-clockwise (inside the domain: all around, summing
+    to 2π; on the boundary: from one boundary curve to the other, summing to the
+    interior angle) and whether it lies on the boundary.
+
+    A cross field aligned to every curve turns by α − k π/2 across a sector of angle α
+    (k = round(α/(π/2))), so it has the index :attr:`index` there: 0 at a T or a cross
+    of curves, at an interface meeting a straight boundary at 90°, at the end of an
+    embedded curve; +1/4 where three curves meet at 120°.
+    """
+
+    x: float
+    y: float
+    sectors: tuple[float, ...]
+    on_boundary: bool
+
+    @property
+    def index(self) -> float:
+        """(k − Σ_i k_i)/4: k_i the sectors' quarter turns, k that of the whole angle
+        (4 inside the domain)."""
+        k = [int(round(a / (math.pi / 2))) for a in self.sectors]
+        whole = int(round(sum(self.sectors) / (math.pi / 2))) if self.on_boundary else 4
+        return (whole - sum(k)) / 4
+
+
+@dataclass(frozen=True)
 class PhysicalGroup:
     """A named group of model entities of the file (Gmsh's ``Physical Curve`` /
     ``Physical Surface`` / ``Physical Point``): its dimension, number, name ('' where the
@@ -68,6 +96,14 @@ class Domain:
     ``mesh_size`` is the mean edge length of the mesh; ``requested_mesh_size`` the
     size Gmsh was asked for (None: the file's own sizes, or a ``.msh``).
     ``notes`` lists what the loader changed or dropped, one line each.
+
+    The model entities: ``cell_tags`` the surface (region) of every cell;
+    ``curve_tags`` every facet on a model curve, on the boundary and inside (interfaces
+    between surfaces, curves embedded in a surface), with the curve's tag; ``point_tags``
+    the vertices at model points (corners, ends of curves, embedded points) with the
+    point's tag; ``junctions`` the points where interior curves end, turn or meet (the
+    same on every rank); ``physical_groups`` the file's named groups. A mesh without a
+    model (built without them) has None tags.
     """
 
     mesh: dolfinx.mesh.Mesh
@@ -80,8 +116,12 @@ class Domain:
     notes: tuple[str, ...] = ()
     #: The file's physical groups (empty: the file has none, or a built-in shape).
     physical_groups: tuple[PhysicalGroup, ...] = ()
-    #: Boundary directions from the CAD model: sorted input node indices and the cross
-    #: angle ψ (a tangent's angle, mod π/2) at each of them.
+    cell_tags: dolfinx.mesh.MeshTags | None = None
+    curve_tags: dolfinx.mesh.MeshTags | None = None
+    point_tags: dolfinx.mesh.MeshTags | None = None
+    junctions: tuple[Junction, ...] = ()
+    #: Curve directions from the CAD model (boundary and interior curves): sorted input
+    #: node indices and the cross angle ψ (a tangent's angle, mod π/2) at each of them.
     _direction_nodes: np.ndarray = field(default=None, repr=False)
     _direction_angles: np.ndarray = field(default=None, repr=False)
 
@@ -103,9 +143,22 @@ class Domain:
         local = np.unique(self.facet_tags.values).tolist()
         return sorted({int(t) for part in self.comm.allgather(local) for t in part})
 
+    def interior_curve_facets(self) -> np.ndarray:
+        """The local facets on a model curve that are not on the boundary (interfaces,
+        embedded curves), owned ones only (each facet on one rank)."""
+        if self.curve_tags is None:
+            return np.zeros(0, dtype=np.int32)
+        topology = self.mesh.topology
+        topology.create_connectivity(1, 2)
+        exterior = dolfinx.mesh.exterior_facet_indices(topology)
+        facets = self.curve_tags.indices[self.curve_tags.values != NO_CURVE]
+        owned = topology.index_map(1).size_local
+        return np.setdiff1d(facets[facets < owned], exterior).astype(np.int32)
+
     def boundary_angles(self, V) -> np.ndarray | None:
         """Cross angle ψ (mod π/2) from the CAD curves at every local row of the P1 space
-        ``V`` (NaN where the model gives none); None without a CAD model."""
+        ``V`` on a model curve, boundary or interior (NaN where the model gives none);
+        None without a CAD model."""
         if self._direction_nodes is None:
             return None
         geometry = self.mesh.geometry

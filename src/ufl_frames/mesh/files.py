@@ -80,7 +80,8 @@ def load(
 ) -> Domain:
     """Domain from a ``.geo``, ``.msh``, ``.step``/``.stp`` or ``.brep`` file.
 
-    Physical groups in the file are ignored: the domain is all its surfaces. A ``.msh``
+    The domain is all the file's surfaces, each a region; its physical groups, curves
+    (boundary, interfaces, embedded) and points are kept on the domain. A ``.msh``
     is taken as it is: sizes do not apply. Boundaries whose curves cross (a curve loop
     through itself, a hole across the outline), on which Gmsh's meshing never ends, are
     refused before meshing.

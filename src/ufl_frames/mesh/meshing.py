@@ -66,18 +66,77 @@ def _unite_surfaces(notes: list[str]) -> None:
     occ = gmsh.model.occ.getEntities(2)
     if sorted(occ) == sorted(surfaces):
         before = len(surfaces)
-        gmsh.model.occ.fragment(surfaces[:1], surfaces[1:])
-        gmsh.model.occ.removeAllDuplicates()
+        groups = _groups_and_boxes()
+        # curves and points embedded in a surface go in too: so they stay embedded
+        embedded = sorted({(d, t) for _, s in surfaces
+                           for d, t in gmsh.model.mesh.getEmbedded(2, s) if d < 2})
+        tools = surfaces[1:] + embedded
+        _, pieces = gmsh.model.occ.fragment(surfaces[:1], tools)
         gmsh.model.occ.synchronize()
         after = len(gmsh.model.getEntities(2))
         notes.append(
             f"{before} surfaces fragmented into one conforming domain of {after} surfaces "
             "(shared curves are interior)"
         )
+        _restore_groups(groups, dict(zip(surfaces[:1] + tools, pieces, strict=True)), notes)
     else:
         gmsh.model.geo.removeAllDuplicates()
         gmsh.model.geo.synchronize()
         notes.append(f"{len(surfaces)} surfaces meshed as one domain (shared curves are interior)")
+
+
+def _shape(dim: int, tag: int) -> np.ndarray:
+    """What identifies a model entity across a renumbering: its bounding box and (curves,
+    surfaces) its length or area."""
+    mass = gmsh.model.occ.getMass(dim, tag) if dim > 0 else 0.0
+    return np.array([*gmsh.model.getBoundingBox(dim, tag), mass])
+
+
+def _groups_and_boxes() -> list:
+    """The physical groups of the current model: (dim, tag, name, [(entity, its
+    :func:`_shape`)]) each."""
+    return [(dim, tag, gmsh.model.getPhysicalName(dim, tag),
+             [(int(e), _shape(dim, int(e)))
+              for e in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)])
+            for dim, tag in gmsh.model.getPhysicalGroups()]
+
+
+def _restore_groups(groups: list, pieces: dict, notes: list[str]) -> None:
+    """The physical groups ``groups`` (:func:`_groups_and_boxes`) again after a fragment
+    that changed the model (the OpenCASCADE synchronisation drops them, and renumbers
+    curves): an entity the fragment was given by its pieces (``pieces``: (dim, tag) ->
+    [(dim, tag), ...]), any other by the entity of the same dimension, bounding box and
+    length that is there now; entities not found (a curve split in two) are left out of
+    their group, with a note."""
+    def present():
+        return sorted((d, t, tuple(sorted(int(e) for e in
+                                          gmsh.model.getEntitiesForPhysicalGroup(d, t))))
+                      for d, t in gmsh.model.getPhysicalGroups())
+
+    if present() == sorted((d, t, tuple(sorted(e for e, _ in members)))
+                           for d, t, _, members in groups):
+        return
+    gmsh.model.removePhysicalGroups()
+    now = {d: {t: _shape(d, t) for _, t in gmsh.model.getEntities(d)} for d in range(3)}
+    size = max(1.0, _bounding_box_diagonal())
+    for dim, tag, name, members in groups:
+        kept, lost = [], []
+        for entity, shape in members:
+            if (dim, entity) in pieces:
+                kept += [t for d, t in pieces[(dim, entity)] if d == dim and t in now[dim]]
+                continue
+            same = [t for t, other in now[dim].items()
+                    if np.allclose(other, shape, rtol=1e-9, atol=1e-9 * size)]
+            if same:
+                kept.append(entity if entity in same else same[0])
+            else:
+                lost.append(entity)
+        if lost:
+            notes.append(f"physical group {tag} {name!r} of dimension {dim}: entities "
+                         f"{lost} were split by the fragmentation and left out (make the "
+                         "geometry conforming with BooleanFragments before the groups)")
+        if kept:
+            gmsh.model.addPhysicalGroup(dim, sorted(set(kept)), tag, name)
 
 
 def _override_meshing_requests(notes: list[str]) -> None:

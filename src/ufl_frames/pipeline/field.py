@@ -41,7 +41,9 @@ class FrameField:
     """A frame field on a :class:`~ufl_frames.mesh.Domain`, and its solve.
 
     ``q`` is the P1 field (5 coefficients per vertex); ``boundary_angles`` the exact
-    boundary cross angles of the CAD model per local row (None without one);
+    cross angles of the CAD model's curves per local row (None without one; the field is
+    aligned to the boundary and to the curves inside the domain, see
+    :func:`~ufl_frames.fem.constraints.frame_constraints`);
     ``constraints`` the fixed rows, their directions and lumped masses, found once;
     ``problem`` and ``result`` are set by :meth:`solve`; ``singularities`` are those of
     the current ``q`` (``{"index", "x", "y"}``, the same list on every rank).
@@ -95,7 +97,8 @@ class FrameField:
         """
         V = energy.frame_space(domain.mesh)
         angles = domain.boundary_angles(V)
-        constraints = frame_constraints(V, boundary_angles=angles)
+        constraints = frame_constraints(V, boundary_angles=angles,
+                                        interior_facets=domain.interior_curve_facets())
         q = mbo.mbo_frame_field(V, constraints=constraints, monitor=monitor)
         return cls(domain=domain, q=q, isotropic=isotropic,
                    max_aspect=aspect_bound(isotropic, max_aspect), boundary_angles=angles,
@@ -111,7 +114,8 @@ class FrameField:
 
         q = interpolate_field(self.q, domain.mesh)
         angles = domain.boundary_angles(q.function_space)
-        constraints = frame_constraints(q.function_space, boundary_angles=angles)
+        constraints = frame_constraints(q.function_space, boundary_angles=angles,
+                                        interior_facets=domain.interior_curve_facets())
         return FrameField(domain=domain, q=q, isotropic=self.isotropic,
                           max_aspect=self.max_aspect, boundary_angles=angles,
                           constraints=constraints,
@@ -265,10 +269,16 @@ class FrameField:
 
     def index_theorem(self) -> dict:
         """The singularities' index sum against Poincaré–Hopf for the domain
-        (:func:`ufl_frames.frames2d.singularities.index_theorem`), with the corner angles (°)."""
+        (:func:`ufl_frames.frames2d.singularities.index_theorem`), with the corner angles (°).
+
+        The boundary's corners alone fix the sum: curves inside the domain (interfaces,
+        embedded curves) only say where some singularities sit. ``junction_index`` is the
+        index their junctions force (:attr:`~ufl_frames.mesh.domain.Junction.index`: 0 at
+        a T or at an interface meeting the boundary at 90°), part of ``index_sum``."""
         corners = self.domain.corners
         check = singularities.index_theorem(
             self.singularities, self.domain.euler_characteristic, [c.angle for c in corners]
         )
         check["corner_angles_deg"] = [round(math.degrees(c.angle), 6) for c in corners]
+        check["junction_index"] = float(sum(j.index for j in self.domain.junctions)) + 0.0
         return check

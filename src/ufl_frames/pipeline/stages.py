@@ -56,22 +56,25 @@ class RootField:
     """A frame field gathered onto rank 0 (collective to make), and the disk it is cut
     into there, made on first use and kept for every later stage.
 
-    ``domain`` is the field's :class:`~ufl_frames.mesh.Domain`; the gathered arrays
-    and the :class:`~ufl_frames.param.cut.CutMesh` live on rank 0 only.
+    ``domain`` is the field's :class:`~ufl_frames.mesh.Domain`; the gathered arrays,
+    ``features`` (the model's regions, curves and points on them,
+    :class:`~ufl_frames.param.features.Features`) and the
+    :class:`~ufl_frames.param.cut.CutMesh` live on rank 0 only (None elsewhere).
     """
 
     def __init__(self, frames: FrameField):
-        from ufl_frames.param.gather import gather_field
+        from ufl_frames.param.gather import gather_features, gather_field
 
         self.domain = frames.domain
         self._arrays = gather_field(frames.q)  # (x, cells, rows) on rank 0
+        self.features = gather_features(frames.domain)
         self._cut = None
 
     def _cut_mesh(self):
         from ufl_frames.param import cut
 
         if self._cut is None:
-            self._cut = cut.cut_mesh(*self._arrays, features=getattr(self, "features", None))
+            self._cut = cut.cut_mesh(*self._arrays, features=self.features)
         return self._cut
 
     def on_root(self, work, failure: str):
