@@ -9,7 +9,6 @@ Importing this module starts nothing (no PETSc, no DOLFINx): :func:`run` starts 
 (without command-line options, unless the caller started it first) when it is called.
 """
 
-import hashlib
 import math
 import os
 import re
@@ -245,11 +244,12 @@ def run_record(config: RunConfig, comm, petsc_options: dict) -> dict:
     geometry, identity = config.geometry, None
     if geometry in geometry_module.KNOWN_GEOMETRIES:
         identity = geometry
-    elif comm.rank == 0:
-        try:
-            identity = "sha256:" + hashlib.sha256(Path(geometry).read_bytes()).hexdigest()
-        except OSError:
-            identity = None  # meshing reports it
+    elif comm.rank == 0:  # None: not a regular file, too large or unreadable (meshing says)
+        from ufl_frames.mesh.files import file_digest
+        from ufl_frames.mesh.meshing import MAX_TRIANGLES
+
+        limit = MAX_TRIANGLES if config.max_triangles is None else config.max_triangles
+        identity = file_digest(geometry, limit)
     identity = comm.bcast(identity, root=0)
     record = {"geometry": geometry, "geometry_id": identity}
     for name in ("isotropic", "mesh_size", "size_factor", "max_triangles", "max_aspect",
