@@ -201,6 +201,9 @@ def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
     solve.add_argument("--quad-size", type=_positive_float, default=None, metavar="S",
                        help="the quads' mean edge length (default: with --quads the triangles' "
                        "mean edge length; with --param only, about one quad per 8 triangles)")
+    solve.add_argument("--max-quads", type=_positive_float, default=None, metavar="N",
+                       help="refuse, before the solve, a --quad-size estimated to give more "
+                       "quads (area / size^2; default 2e6)")
     solve.add_argument("--free-singularities", action="store_true",
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "

@@ -23,11 +23,24 @@ from ufl_frames.bootstrap import init_petsc, options_scope
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
 from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
 
-__all__ = ["RunConfig", "check_output_folder", "default_output_folder", "run"]
+__all__ = ["IncompleteRun", "RunConfig", "check_output_folder", "default_output_folder",
+           "estimated_quads", "run"]
 
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.mesh.load
 DEFAULT_MAX_IT = 500
+#: Largest estimated quad count (the domain's area over the squared ``quad_size``) made
+#: without asking (``max_quads``); the quad stage's memory grows with it.
+MAX_QUADS = 2_000_000
+
+
+class IncompleteRun(RunError):
+    """The run wrote its results, but a stage that was asked for failed and is missing
+    from them (exit status 1; ``summary`` is what was written)."""
+
+    def __init__(self, message: str, summary: dict):
+        super().__init__(message)
+        self.summary = summary
 
 
 @dataclass(frozen=True)
@@ -59,6 +72,7 @@ class RunConfig:
     param: bool = False
     quads: bool = False
     quad_size: float | None = None
+    max_quads: float | None = None
     quiet: bool = False
 
     def __post_init__(self):
@@ -213,9 +227,35 @@ def _check_config(config: RunConfig, petsc_options: dict) -> None:
     if pin_radius > 0 and config.free_singularities:
         raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
                          "with --free-singularities")
+    for name in ("quad_size", "max_quads"):
+        value = getattr(config, name)
+        if value is not None and not (_finite_real(value) and value > 0):
+            raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value!r}")
     problem = petsc_option_problem(petsc_options)
     if problem is not None:
         raise InputError(problem)
+
+
+def estimated_quads(area: float, quad_size: float) -> float:
+    """Quads of mean edge ``quad_size`` that cover ``area``: ``area / quad_size²``."""
+    return area / (quad_size * quad_size)
+
+
+def _check_quad_count(config: RunConfig, domain) -> None:
+    """Raise :class:`InputError` (collective) where ``quad_size`` asks for more quads than
+    ``max_quads`` (default :data:`MAX_QUADS`) on the domain, before the field is solved."""
+    from ufl_frames.fem.scales import area
+
+    if config.quad_size is None or not (config.param or config.quads):
+        return  # the default size gives about as many quads as triangles, or fewer
+    limit = MAX_QUADS if config.max_quads is None else config.max_quads
+    total = area(domain.mesh)
+    estimate = estimated_quads(total, config.quad_size)
+    if estimate > limit:
+        raise InputError(
+            f"quad size {config.quad_size:g} on a domain of area {total:.3g} gives about "
+            f"{estimate:.2g} quads, more than the limit {limit:.3g}: choose a larger "
+            "--quad-size (or raise --max-quads)")
 
 
 #: PETSc options that change what a run prints, not what it computes: not compared
@@ -326,10 +366,14 @@ def run(config: RunConfig, comm=None) -> dict:
             input is unusable (a :class:`ufl_frames.mesh.GeometryError`, a bad
             parameter or PETSc option in the database, an existing non-empty output
             folder, a coarse level of a given ``levels`` that fails or loses a hole).
-        RunError: a solve, a stage or writing the results fails on every rank alike
-            (a PETSc error, no valid quad mesh at the size, a full disk).
+        RunError: a solve or writing the results fails on every rank alike (a PETSc
+            error, a full disk).
+        IncompleteRun: a stage asked for (the map, the quads) failed (no valid quad mesh
+            at the size): the field, its figures and the summary (its ``missing`` says
+            what and why) are written all the same, and the summary is the exception's.
 
-    Other exceptions are bugs and keep their type. The output folder is written whole or
+    A figure that cannot be drawn is left out with a warning (``missing`` in the
+    summary). Other exceptions are bugs and keep their type. The output folder is written whole or
     not at all (:class:`ufl_frames.output.OutputFolder`). PETSc options in the database
     (``-tao_type`` ...) are honoured; the defaults the solvers add to the database are
     removed afterwards.
@@ -351,6 +395,7 @@ def run(config: RunConfig, comm=None) -> dict:
     check_output_folder(out, config.force, comm, resuming=config.resume is not None)
     domains = _mesh(config, comm, say)
     domain = domains[-1]
+    _check_quad_count(config, domain)
     interrupts.set_stage("the MBO initial field")
     interrupts.raise_if_interrupted(comm)
     for note in domain.notes:
@@ -368,7 +413,7 @@ def run(config: RunConfig, comm=None) -> dict:
         solve.solve(domains)
         solve.report()
         solve.stages()
-        return solve.write(start, petsc_options)
+        summary = solve.write(start, petsc_options)
     except KeyboardInterrupt:  # Interrupted too: the checkpoint, if any, is for --resume
         raise
     except BaseException:
@@ -376,6 +421,8 @@ def run(config: RunConfig, comm=None) -> dict:
         raise
     finally:
         interrupts.note_checkpoint(None)
+    solve.check_complete(summary)
+    return summary
 
 
 class _Solve:
@@ -395,6 +442,8 @@ class _Solve:
         self.tao_type = None
         self.max_it = config.max_it  # -tao_max_it wins
         self.param = self.quads = None  # the stages' records
+        self.missing: dict[str, str] = {}  # what was asked for and is not written: why
+        self.skipped: list[tuple[str, str]] = []  # figures that could not be drawn
         self._finest_space = None
         self._levels = 1
 
@@ -563,29 +612,57 @@ class _Solve:
         config, say = self.config, self.say
         root = None
         if config.param:
-            with failures("the parametrisation"):
-                root = stages.RootField(self.field)
-                self.param = stages.parametrise(root, quad_size=config.quad_size)
+            try:
+                with failures("the parametrisation"):
+                    root = stages.RootField(self.field)
+                    self.param = stages.parametrise(root, quad_size=config.quad_size)
+            except (RunError, MemoryError) as e:  # the field is kept: written without it
+                self._stage_failed("param", "the parametrisation", e)
+            interrupts.raise_if_interrupted(self.comm)
+        if self.param is not None:
             quality = self.param.quality
             say(f"parametrisation: misfit {quality['misfit']:.4f}, "
                 f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
                 f"of length {quality['cut_length']:.3g}")
-            interrupts.raise_if_interrupted(self.comm)
         if config.quads:
             interrupts.set_stage("the quad mesh")
             say("quad mesh ...")
-            with failures("the quad mesh"):
-                try:
-                    root = stages.RootField(self.field) if root is None else root
-                    self.quads = stages.quadrangulate(root, quad_size=config.quad_size)
-                except ValueError as e:  # no valid integer-grid map: the same on every rank
-                    raise RunError(str(e)) from e
+            try:
+                with failures("the quad mesh"):
+                    try:
+                        root = stages.RootField(self.field) if root is None else root
+                        self.quads = stages.quadrangulate(root, quad_size=config.quad_size)
+                    except ValueError as e:  # no valid integer-grid map: alike on every rank
+                        raise RunError(str(e)) from e
+            except (RunError, MemoryError) as e:  # the field is kept: written without it
+                self._stage_failed("quads", "the quad mesh", e)
+            interrupts.raise_if_interrupted(self.comm)
+        if self.quads is not None:
             found = self.quads.quality
             say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
                 f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
                 + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
-            interrupts.raise_if_interrupted(self.comm)
+
+    def _stage_failed(self, key: str, stage: str, error: BaseException) -> None:
+        """Record that ``stage`` (summary key ``key``) failed with ``error``, and warn: the
+        run goes on to write the field without it, and ends with status 1."""
+        reason = ("out of memory" if isinstance(error, MemoryError)
+                  else str(error).removeprefix(f"{stage} failed: "))
+        self.missing[key] = reason
+        warn(self.comm, self.config.quiet, f"{stage} failed; the frame field is written "
+             "without it (the reason ends the run)")
+
+    def check_complete(self, summary: dict) -> None:
+        """Raise :class:`IncompleteRun` where a stage asked for is missing from the
+        results written (their summary ``summary``)."""
+        if not self.missing:
+            return
+        what = {"param": "the parametrisation", "quads": "the quad mesh"}
+        key, reason = next(iter(self.missing.items()))
+        raise IncompleteRun(
+            f"{what[key]} failed: {reason}; the frame field and summary.json were written to "
+            f"{str(self.out)!r} without it", summary)
 
     # --- the output folder ---
 
@@ -623,11 +700,15 @@ class _Solve:
         from ufl_frames.pipeline import files
 
         label, comm = self.config.label, self.comm
-        names = files.write_field(staging, self.field, label=label, tao_type=self.tao_type)
+        skipped = self.skipped
+        names = files.write_field(staging, self.field, label=label, tao_type=self.tao_type,
+                                  skipped=skipped)
         if self.param is not None:
-            names += files.write_param(staging, self.param, label, comm)
+            names += files.write_param(staging, self.param, label, comm, skipped=skipped)
         if self.quads is not None:
-            names += files.write_quads(staging, self.quads, label, comm)
+            names += files.write_quads(staging, self.quads, label, comm, skipped=skipped)
+        for name, reason in skipped:
+            warn(comm, self.config.quiet, f"{name} could not be drawn ({reason}): left out")
         return [*names, "summary.json"]
 
     def summary(self, start: float, petsc_options: dict, files: list[str]) -> dict:
@@ -660,6 +741,8 @@ class _Solve:
             "petsc_options": petsc_options,
             "resumed_from_iteration": None if self.state is None else self.state.iterations,
             **findings_record(self.field, self.param, self.quads),
+            "missing": {**self.missing, **{name: f"could not be drawn: {reason}"
+                                           for name, reason in self.skipped}},
             "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
             "files": files,
         }
