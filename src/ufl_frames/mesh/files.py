@@ -27,7 +27,9 @@ mesh of the whole planar domain:
   folder is refused before anything reads it (:func:`check_input_file`), also where a
   ``.geo`` includes or merges it.
 
-The geometry must lie in a plane z = const; volumes and tetrahedra are rejected.
+The geometry must lie in one plane: a model in a plane other than z = const is rotated into
+z = 0 and meshed there (:func:`_into_own_plane`, the frame in the notes), a ``.msh`` in one
+is read in its own coordinates; volumes and tetrahedra are rejected.
 """
 
 import contextlib
@@ -43,9 +45,10 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc()
 
 import gmsh  # noqa: E402
+import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames.mesh.arrays import surfaces  # noqa: E402
+from ufl_frames.mesh.arrays import plane_frame, surfaces  # noqa: E402
 from ufl_frames.mesh.distribute import create, verbose  # noqa: E402
 from ufl_frames.mesh.domain import (  # noqa: E402
     Domain,
@@ -160,6 +163,7 @@ def load(
             )
         if not surfaces():
             raise GeometryError(f"{source!r} defines no 2D surface")
+        _into_own_plane(source, notes)
         check_crossings(source)
         return mesh_model(Sizing(h, factor, limit, refinements), notes)
 
@@ -244,6 +248,53 @@ def file_digest(path, max_triangles: float = MAX_TRIANGLES) -> str | None:
         return "sha256:" + digest.hexdigest()
     except (GeometryError, OSError):
         return None
+
+
+def _into_own_plane(source: str, notes: list[str]) -> None:
+    """Rotate a model that lies in a plane other than z = const into z = 0 (its points
+    and points along its curves, :func:`~ufl_frames.mesh.arrays.plane_frame`): its mesh
+    coordinates are then (u, v) along the plane's axes e1, e2 from its origin o, said in
+    ``notes``. Raises :class:`GeometryError` where the model lies in no plane."""
+    samples = [np.asarray(gmsh.model.getValue(0, tag, []), dtype=float)
+               for _, tag in gmsh.model.getEntities(0)]
+    for _, curve in gmsh.model.getEntities(1):
+        lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, curve))
+        samples.append(np.asarray(gmsh.model.getValue(1, curve, np.linspace(lo, hi, 9)),
+                                  dtype=float))
+    xyz = np.concatenate([p.reshape(-1, 3) for p in samples]) if samples else np.zeros((0, 3))
+    frame = plane_frame(xyz, source)
+    if frame is None:
+        return
+    origin, e1, e2 = frame
+    normal = np.cross(e1, e2)
+    occ = gmsh.model.occ.getEntities(2)
+    if occ:
+        rows = np.stack([e1, e2, normal])  # p -> R (p - o)
+        matrix = np.concatenate([rows, -(rows @ origin)[:, None]], axis=1)
+        gmsh.model.occ.affineTransform(occ, matrix.ravel().tolist())
+        gmsh.model.occ.synchronize()
+    if gmsh.model.getEntities(0) and not occ:
+        points = gmsh.model.getEntities(0)  # the built-in kernel's curves follow its points
+        geo = gmsh.model.geo
+        geo.translate(points, *(-origin))
+        # normal -> z about the horizontal axis e1, then e1 -> x about z
+        angle = float(np.arccos(np.clip(normal[2], -1.0, 1.0)))
+        if angle > 0:
+            geo.rotate(points, 0, 0, 0, *e1, -angle)
+        geo.rotate(points, 0, 0, 0, 0, 0, 1, -float(np.arctan2(e1[1], e1[0])))
+        geo.synchronize()
+    check = [np.asarray(gmsh.model.getValue(0, tag, []))[2] for _, tag in gmsh.model.getEntities(0)]
+    scale = max(float(np.abs(xyz).max()), 1e-300)
+    if check and float(np.ptp(check)) > 1e-8 * scale:
+        raise GeometryError(f"{source!r} lies in a tilted plane that could not be rotated into "
+                            "z = 0 (mixed CAD kernels?)")
+    notes.append("the geometry lies in a tilted plane: meshed in its own coordinates "
+                 f"(u, v) = ((p - o)·e1, (p - o)·e2), o = {_vector(origin)}, "
+                 f"e1 = {_vector(e1)}, e2 = {_vector(e2)}")
+
+
+def _vector(v) -> str:
+    return "(" + ", ".join(f"{float(c):.6g}" for c in v) + ")"
 
 
 def _check_msh_header(path: Path) -> None:
