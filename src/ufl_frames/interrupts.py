@@ -37,7 +37,11 @@ class Interrupted(KeyboardInterrupt):
         where = f" during {self.stage}" if self.stage else ""
         what = ("nothing written" if self.resume is None else
                 f"resume with --resume {self.resume}")
-        return f"interrupted by {signal.Signals(self.signum).name}{where}; {what}"
+        try:
+            name = signal.Signals(self.signum).name
+        except ValueError:
+            name = f"signal {self.signum}"
+        return f"interrupted by {name}{where}; {what}"
 
 
 class SignalWatch:
@@ -115,7 +119,9 @@ class SignalWatch:
                 info = signal.sigtimedwait(self.SIGNALS, 0.1)
             except InterruptedError:
                 continue
-            if info is not None:
+            # A debugger or profiler attaching (ptrace) wakes sigtimedwait without one
+            # of our signals: si_signo is then anything, and is not ours to act on.
+            if info is not None and info.si_signo in self.SIGNALS:
                 self._notify(info.si_signo)
 
     def _notify(self, signum: int) -> None:

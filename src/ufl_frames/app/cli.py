@@ -384,6 +384,24 @@ def _quiet_petsc_finalize() -> None:
         db.setValue("options_left", "no")
 
 
+#: PETSc options read by PETSc itself, not by an object of the run: never "unused".
+_PETSC_OWN_OPTIONS = ("help", "options_left", "log_view", "malloc_debug", "info")
+
+
+def _warn_unused(options, comm, quiet: bool) -> None:
+    """Warn (rank 0) about the command line's PETSc options no solver of the run read:
+    misspelt, or for a solver the run does not make (PETSc's ``-options_left``)."""
+    from petsc4py import PETSc
+
+    db = PETSc.Options()
+    unused = [f"-{name}" for name, _ in options
+              if name not in _PETSC_OWN_OPTIONS and not db.used(name)]
+    if unused and not quiet and comm.rank == 0:
+        print(f"{PROG}: warning: PETSc option{'s' if len(unused) > 1 else ''} "
+              f"{', '.join(dict.fromkeys(unused))} {'were' if len(unused) > 1 else 'was'} not "
+              "used by any solver of the run (misspelt?)", file=sys.stderr, flush=True)
+
+
 def _all_failed(agreement, timeout: float) -> bool:
     """Whether every rank of ``agreement`` (a communicator used for nothing else) reaches
     this point within ``timeout`` seconds: an error all ranks met, not one rank's own."""
@@ -423,8 +441,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     try:
         _check_text(argv)
+        # PETSc's -help is not argparse's -h with the value "elp": PETSc's, for the run.
+        petsc_help = [("help", None)] if "-help" in argv else []
+        argv = [a for a in argv if a != "-help"]
         args, extras = build_parser().parse_known_args(argv)
-        options = split_petsc_options(extras)
+        options = split_petsc_options(extras) + petsc_help
         if args.command is None:
             raise UsageError("missing command: use 'solve' or 'info' (see ufl-frames --help)")
         if args.command == "solve" and args.resume is not None and args.out is not None \
@@ -462,6 +483,7 @@ def main(argv: list[str] | None = None) -> int:
                 interrupts.activate(watch)
                 try:
                     run(RunConfig.from_args(args), comm=comm)
+                    _warn_unused(options, comm, args.quiet)
                 except Exception as e:
                     watch.stage = "reporting the failure"
                     status = _report_failure(e, comm, agreement)
