@@ -21,7 +21,7 @@ __all__ = ["INTERRUPTED_STATUS", "INTERRUPT_GRACE_S", "Interrupted", "SignalWatc
 INTERRUPTED_STATUS = 130
 #: Seconds an interrupt waits for the run to stop cleanly at its next MBO level or TAO
 #: iteration before the process exits anyway (the staging folder removed first).
-INTERRUPT_GRACE_S = 3.0
+INTERRUPT_GRACE_S = 1.5
 
 class Interrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM, acted on at a point where the run can stop cleanly."""
