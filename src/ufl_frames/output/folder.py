@@ -125,12 +125,13 @@ class OutputFolder:
             self._created += create_missing(target.parent)
             token = f"{os.getpid():x}{secrets.token_hex(4)}"
             staging = target.parent / f".{target.name}.ufl-frames-{token}.partial"
+            self._guard = _start_guard(staging)  # first: no moment the folder is unguarded
             try:
                 staging.mkdir()
             except OSError as e:
+                self._stop_guard()
                 raise WriteError(e.errno, f"cannot create a folder in {str(target.parent)!r} "
                                  f"({e.strerror})") from e
-            self._guard = _start_guard(staging)
             result = str(staging)
 
         on_root(self.comm, make)
