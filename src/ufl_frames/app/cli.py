@@ -36,7 +36,8 @@ under ``mpirun``) and a status, never a traceback (``UFL_FRAMES_DEBUG=1`` prints
   would act outside the run, a boundary that crosses itself, meshing past
   ``--mesh-time-limit``, an unusable output folder, a ``--resume`` folder without a
   checkpoint of this run, and failures on the way (an MBO or TAO solve PETSc fails, a
-  write error);
+  write error); a stage asked for (``--param``, ``--quads``) that fails, after the field
+  and the summary are written without it;
 * 130, interrupted (SIGINT, Ctrl-C, or SIGTERM): at the next MBO level or TAO iteration,
   or within :data:`ufl_frames.interrupts.INTERRUPT_GRACE_S` seconds, whatever runs
   (meshing at once).
