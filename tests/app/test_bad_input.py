@@ -944,6 +944,30 @@ def test_quad_count_is_refused_before_the_solve(shared_tmp, capsys, monkeypatch)
     assert list(shared_tmp.iterdir()) == []
 
 
+def test_memory_estimate_is_refused_before_the_solve(shared_tmp, capsys, monkeypatch):
+    from ufl_frames.app import run as runs
+
+    monkeypatch.chdir(shared_tmp)
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--max-memory", "0.1"],
+                               capsys)
+    assert status == 1
+    if line is not None:
+        found = re.search(r"needs about (\S+) GiB \((\d+) triangles, 0 quads\), more than the "
+                          r"limit \(0\.1 GiB\)", line)
+        assert found, line
+        need = runs.estimated_memory(int(found.group(2)), 0) / 2**30
+        assert float(found.group(1)) == pytest.approx(need, rel=1e-2)
+        assert "--max-memory" in line
+    assert list(shared_tmp.iterdir()) == []
+    monkeypatch.setattr(runs, "available_memory", lambda: 2.0**28)  # a machine of 256 MiB
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--quads"], capsys)
+    assert status == 1
+    if line is not None:
+        assert "more than the memory available (0.25 GiB)" in line, line
+    assert list(shared_tmp.iterdir()) == []
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--max-memory", "64", "--out", "o"]) == 0
+
+
 def _read_back(folder: Path):
     """(points (n, 2), cells (m, 3)) of the frame field written in ``folder``."""
     data = output.read_vtk(folder / "frames.pvd")

@@ -205,6 +205,9 @@ def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
     solve.add_argument("--max-quads", type=_positive_float, default=None, metavar="N",
                        help="refuse, before the solve, a --quad-size estimated to give more "
                        "quads (area / size^2; default 2e6)")
+    solve.add_argument("--max-memory", type=_positive_float, default=None, metavar="GIB",
+                       help="refuse, before the solve, a mesh and quads estimated to need "
+                       "more memory (GiB; default: the memory available)")
     solve.add_argument("--free-singularities", action="store_true",
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "

@@ -32,6 +32,12 @@ DEFAULT_MAX_IT = 500
 #: Largest estimated quad count (the domain's area over the squared ``quad_size``) made
 #: without asking (``max_quads``); the quad stage's memory grows with it.
 MAX_QUADS = 2_000_000
+#: What a run's peak memory grows by per triangle of its mesh and per quad of its quad
+#: stage, and what it takes at least (bytes; serial runs on the annulus, 3.5e4 to 1.4e5
+#: triangles and 2.6e5 to 1e6 quads, rounded up): :func:`estimated_memory`.
+BYTES_PER_TRIANGLE = 6000
+BYTES_PER_QUAD = 1200
+BASE_BYTES = 300 * 2**20
 
 
 class IncompleteRun(RunError):
@@ -73,6 +79,7 @@ class RunConfig:
     quads: bool = False
     quad_size: float | None = None
     max_quads: float | None = None
+    max_memory: float | None = None
     quiet: bool = False
 
     def __post_init__(self):
@@ -227,7 +234,7 @@ def _check_config(config: RunConfig, petsc_options: dict) -> None:
     if pin_radius > 0 and config.free_singularities:
         raise InputError("--pin-radius holds pinned singularities: it cannot be combined "
                          "with --free-singularities")
-    for name in ("quad_size", "max_quads"):
+    for name in ("quad_size", "max_quads", "max_memory"):
         value = getattr(config, name)
         if value is not None and not (_finite_real(value) and value > 0):
             raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value!r}")
@@ -241,21 +248,55 @@ def estimated_quads(area: float, quad_size: float) -> float:
     return area / (quad_size * quad_size)
 
 
-def _check_quad_count(config: RunConfig, domain) -> None:
-    """Raise :class:`InputError` (collective) where ``quad_size`` asks for more quads than
-    ``max_quads`` (default :data:`MAX_QUADS`) on the domain, before the field is solved."""
+def estimated_memory(triangles: float, quads: float) -> float:
+    """Bytes a run of ``triangles`` triangles and ``quads`` quads needs at its peak, all
+    processes together (:data:`BASE_BYTES`, :data:`BYTES_PER_TRIANGLE`,
+    :data:`BYTES_PER_QUAD`)."""
+    return BASE_BYTES + BYTES_PER_TRIANGLE * triangles + BYTES_PER_QUAD * quads
+
+
+def available_memory() -> float | None:
+    """Bytes of memory available now (``MemAvailable`` of ``/proc/meminfo``; None where
+    it cannot be read)."""
+    try:
+        with open("/proc/meminfo", "rb") as f:
+            for line in f.read(65536).decode("ascii", "replace").splitlines():
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def _check_sizes(config: RunConfig, domain, comm) -> None:
+    """Raise :class:`InputError` (collective) before the field is solved where
+    ``quad_size`` asks for more quads than ``max_quads`` (default :data:`MAX_QUADS`), or
+    the mesh and the quads would need more memory (:func:`estimated_memory`) than
+    ``max_memory`` GiB (default: what :func:`available_memory` says on rank 0)."""
     from ufl_frames.fem.scales import area
 
-    if config.quad_size is None or not (config.param or config.quads):
-        return  # the default size gives about as many quads as triangles, or fewer
-    limit = MAX_QUADS if config.max_quads is None else config.max_quads
-    total = area(domain.mesh)
-    estimate = estimated_quads(total, config.quad_size)
-    if estimate > limit:
+    quads = 0.0
+    if config.param or config.quads:
+        total = area(domain.mesh)
+        size = domain.mesh_size if config.quad_size is None else config.quad_size
+        quads = estimated_quads(total, size)
+        limit = MAX_QUADS if config.max_quads is None else config.max_quads
+        if config.quad_size is not None and quads > limit:
+            raise InputError(
+                f"quad size {config.quad_size:g} on a domain of area {total:.3g} gives about "
+                f"{quads:.2g} quads, more than the limit {limit:.3g}: choose a larger "
+                "--quad-size (or raise --max-quads)")
+    need = estimated_memory(domain.num_cells, quads)
+    if config.max_memory is not None:
+        limit, which = config.max_memory * 2**30, "the limit"
+    else:
+        limit, which = comm.bcast(available_memory() if comm.rank == 0 else None, root=0), \
+            "the memory available"
+    if limit is not None and need > limit:
         raise InputError(
-            f"quad size {config.quad_size:g} on a domain of area {total:.3g} gives about "
-            f"{estimate:.2g} quads, more than the limit {limit:.3g}: choose a larger "
-            "--quad-size (or raise --max-quads)")
+            f"the run needs about {need / 2**30:.3g} GiB ({domain.num_cells} triangles, "
+            f"{quads:.2g} quads), more than {which} ({limit / 2**30:.3g} GiB): choose a "
+            "larger --mesh-size or --quad-size (or set --max-memory)")
 
 
 #: PETSc options that change what a run prints, not what it computes: not compared
@@ -395,7 +436,7 @@ def run(config: RunConfig, comm=None) -> dict:
     check_output_folder(out, config.force, comm, resuming=config.resume is not None)
     domains = _mesh(config, comm, say)
     domain = domains[-1]
-    _check_quad_count(config, domain)
+    _check_sizes(config, domain, comm)
     interrupts.set_stage("the MBO initial field")
     interrupts.raise_if_interrupted(comm)
     for note in domain.notes:
