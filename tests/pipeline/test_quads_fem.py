@@ -105,7 +105,8 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     COMM.Barrier()
     # the field is not lost to the quads: written with the summary, which says why they lack
     written = json.loads((out / "b" / "summary.json").read_text())
-    assert written == failed.value.summary and "(quad size 1.4 works)" in written["missing"]["quads"]
+    assert written == failed.value.summary
+    assert "(quad size 1.4 works)" in written["missing"]["quads"]
     assert not any(name.startswith("quads") for name in written["files"])
     assert set(written["files"]) == {p.name for p in (out / "b").iterdir()}
 

@@ -124,9 +124,10 @@ def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> Fram
     inches, its longer side (horizontal or vertical, as the domain comes) capped by
     :data:`AXES_LONG_MAX_IN`: an elongated domain gets a long figure, not a sliver in
     a fixed-width one; its shorter side is at least :data:`AXES_SHORT_MIN_IN` (a domain
-    thinner than that at equal aspect is stretched across: ``equal`` False). The figure adds room for labels, the colour bar (below wide
-    domains, right of the others), the legend and the title, wrapped to its width,
-    and is at least :data:`FIGURE_MIN_IN`. Depends only on the shape: scaling the
+    thinner than that at equal aspect is stretched across: ``equal`` False). The
+    figure adds room for labels, the colour bar (below wide domains, right of the
+    others), the legend and the title, wrapped to its width, and is at least
+    :data:`FIGURE_MIN_IN`. Depends only on the shape: scaling the
     domain (mm instead of m) changes nothing but ``scale``.
 
     Args:
