@@ -657,7 +657,7 @@ class _Solve:
                 with failures("the parametrisation"):
                     root = stages.RootField(self.field)
                     self.param = stages.parametrise(root, quad_size=config.quad_size)
-            except (RunError, MemoryError) as e:  # the field is kept: written without it
+            except RunError as e:  # the same on every rank: the field is written without it
                 self._stage_failed("param", "the parametrisation", e)
             interrupts.raise_if_interrupted(self.comm)
         if self.param is not None:
@@ -675,7 +675,7 @@ class _Solve:
                         self.quads = stages.quadrangulate(root, quad_size=config.quad_size)
                     except ValueError as e:  # no valid integer-grid map: alike on every rank
                         raise RunError(str(e)) from e
-            except (RunError, MemoryError) as e:  # the field is kept: written without it
+            except RunError as e:  # the same on every rank: the field is written without it
                 self._stage_failed("quads", "the quad mesh", e)
             interrupts.raise_if_interrupted(self.comm)
         if self.quads is not None:
@@ -688,8 +688,7 @@ class _Solve:
     def _stage_failed(self, key: str, stage: str, error: BaseException) -> None:
         """Record that ``stage`` (summary key ``key``) failed with ``error``, and warn: the
         run goes on to write the field without it, and ends with status 1."""
-        reason = ("out of memory" if isinstance(error, MemoryError)
-                  else str(error).removeprefix(f"{stage} failed: "))
+        reason = str(error).removeprefix(f"{stage} failed: ")
         self.missing[key] = reason
         warn(self.comm, self.config.quiet, f"{stage} failed; the frame field is written "
              "without it (the reason ends the run)")

@@ -268,10 +268,16 @@ def _into_own_plane(source: str, notes: list[str]) -> None:
     origin, e1, e2 = frame
     normal = np.cross(e1, e2)
     occ = gmsh.model.occ.getEntities(2)
-    if occ:
+    if occ:  # the surfaces (their curves and points follow) and what bounds none of them
+        bounded = {(1, abs(t)) for _, t in gmsh.model.getBoundary(occ, combined=False,
+                                                                   oriented=False)}
+        free = [e for e in gmsh.model.occ.getEntities(1) if e not in bounded]
+        bounded |= {(0, abs(t)) for _, t in gmsh.model.getBoundary(
+            occ + free, combined=False, oriented=False, recursive=True)}
+        free += [e for e in gmsh.model.occ.getEntities(0) if e not in bounded]
         rows = np.stack([e1, e2, normal])  # p -> R (p - o)
         matrix = np.concatenate([rows, -(rows @ origin)[:, None]], axis=1)
-        gmsh.model.occ.affineTransform(occ, matrix.ravel().tolist())
+        gmsh.model.occ.affineTransform(occ + free, matrix.ravel().tolist())
         gmsh.model.occ.synchronize()
     if gmsh.model.getEntities(0) and not occ:
         points = gmsh.model.getEntities(0)  # the built-in kernel's curves follow its points
