@@ -17,6 +17,8 @@ last), holds:
 import hashlib
 import json
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -168,13 +170,13 @@ def read(out, comm) -> dict:
                      "an interrupted run leaves one")
         else:
             try:
-                with np.load(path, allow_pickle=False) as data:
-                    meta = json.loads(str(data["meta"]))
-                    arrays = {k: data[k] for k in data.files if k != "meta"}
-                if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-                    raise ValueError("unknown format")
-                result = (meta, arrays)
-            except (OSError, ValueError, KeyError, EOFError) as e:
+                result = _load(path)
+            except zipfile.BadZipFile:
+                error = (f"cannot resume: the checkpoint {str(path)!r} is truncated or not a "
+                         "checkpoint (not a whole .npz file); start again with --force")
+            except _Invalid as e:
+                error = f"cannot resume: the checkpoint {str(path)!r} {e}; start again with --force"
+            except (OSError, ValueError, KeyError, EOFError, zlib.error) as e:
                 error = f"cannot resume: the checkpoint {str(path)!r} is unreadable ({e})"
     error = comm.bcast(error, root=0)
     if error is not None:
@@ -182,6 +184,43 @@ def read(out, comm) -> dict:
     meta = comm.bcast(result[0] if result else None, root=0)
     meta["arrays"] = result[1] if result else None
     return meta
+
+
+class _Invalid(ValueError):
+    """A checkpoint file that reads but holds no usable state (says what is wrong)."""
+
+
+def _load(path: Path) -> tuple[dict, dict]:
+    """(meta, arrays) of a checkpoint file, checked: a whole file, its format, finite
+    values of the right shapes.
+
+    Raises:
+        zipfile.BadZipFile: not a whole ``.npz`` (truncated, or another file).
+        _Invalid: the contents are not a usable state.
+    """
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError):  # empty, or another kind of file
+        raise zipfile.BadZipFile("not an .npz archive") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise zipfile.BadZipFile("not an .npz archive")
+    with data:
+        if "meta" not in data.files or "q" not in data.files:
+            raise _Invalid("lacks its meta or q record")
+        meta = json.loads(str(data["meta"]))
+        arrays = {k: data[k] for k in data.files if k != "meta"}
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise _Invalid(f"has an unknown format (not {FORMAT})")
+    q = arrays["q"]
+    if q.ndim != 2 or q.shape[0] == 0 or not np.issubdtype(q.dtype, np.floating):
+        raise _Invalid(f"holds a field of shape {q.shape} and type {q.dtype}, not rows of numbers")
+    bad = int(np.count_nonzero(~np.isfinite(q).all(axis=1)))
+    if bad:
+        raise _Invalid(f"holds NaN or infinite values in {bad} of its {q.shape[0]} rows")
+    for name in ("active", "held", "released"):
+        if name in arrays and arrays[name].shape != (q.shape[0],):
+            raise _Invalid(f"holds {name} flags of shape {arrays[name].shape}, not ({q.shape[0]},)")
+    return meta, arrays
 
 
 #: The run's arguments that must match to resume, and how a user names them.

@@ -21,7 +21,7 @@ __all__ = ["INTERRUPTED_STATUS", "INTERRUPT_GRACE_S", "Interrupted", "SignalWatc
 INTERRUPTED_STATUS = 130
 #: Seconds an interrupt waits for the run to stop cleanly at its next MBO level or TAO
 #: iteration before the process exits anyway (the staging folder removed first).
-INTERRUPT_GRACE_S = 3.0
+INTERRUPT_GRACE_S = 1.5
 
 class Interrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM, acted on at a point where the run can stop cleanly."""
@@ -37,7 +37,11 @@ class Interrupted(KeyboardInterrupt):
         where = f" during {self.stage}" if self.stage else ""
         what = ("nothing written" if self.resume is None else
                 f"resume with --resume {self.resume}")
-        return f"interrupted by {signal.Signals(self.signum).name}{where}; {what}"
+        try:
+            name = signal.Signals(self.signum).name
+        except ValueError:
+            name = f"signal {self.signum}"
+        return f"interrupted by {name}{where}; {what}"
 
 
 class SignalWatch:
@@ -115,7 +119,9 @@ class SignalWatch:
                 info = signal.sigtimedwait(self.SIGNALS, 0.1)
             except InterruptedError:
                 continue
-            if info is not None:
+            # A debugger or profiler attaching (ptrace) wakes sigtimedwait without one
+            # of our signals: si_signo is then anything, and is not ours to act on.
+            if info is not None and info.si_signo in self.SIGNALS:
                 self._notify(info.si_signo)
 
     def _notify(self, signum: int) -> None:

@@ -8,6 +8,7 @@ the in-process ones also run under ``mpirun -n 2 python -m pytest -m "not serial
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -389,7 +390,7 @@ def test_resume_bad_input(shared_tmp, capsys, monkeypatch):
     for folder, words in [("nowhere", ["'nowhere' does not exist"]),
                           ("file", ["not a folder"]),
                           ("empty", ["holds no checkpoint"]),
-                          ("junk", ["unreadable"])]:
+                          ("junk", ["truncated or not a checkpoint"])]:
         status, line = _main_error([*RESUMABLE, "--resume", folder], capsys)
         assert status == 1, folder
         if line is not None:
@@ -773,3 +774,576 @@ def test_mpirun_mesh_time_limit(tmp_path):
     assert time.monotonic() - started < 30
     assert_one_line_error(proc, 1, "bowtie.geo", "time limit of 2 s", "--mesh-time-limit")
     assert [p.name for p in tmp_path.iterdir()] == ["bowtie.geo"]
+
+
+# --- issue 40: nothing read without bound, no result lost to a picture, no false refusal ------
+#
+# Special files run in a child under an address-space limit and a timeout: a regression that
+# reads /dev/zero without bound, or blocks on a FIFO, fails its test instead of the machine.
+
+#: Address space (bytes) of a child given special files: a normal run needs about 2 GiB.
+CHILD_ADDRESS_SPACE = 4 * 2**30
+#: The 1° corner of a triangle: no valid quad mesh at the default quad size.
+SLIVER = ("Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0};\n"
+          "Point(3) = {Cos(Pi/180), Sin(Pi/180), 0};\n"
+          "Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 1};\n"
+          "Curve Loop(1) = {1, 2, 3}; Plane Surface(1) = {1};\n")
+# Two squares drawn with their own copies of the shared side x = 1 (curves 2 and 8, points
+# 2, 3 and 5, 8), a size field restricted to each: Distance to curve 8 (a duplicate that
+# the loader's removeAllDuplicates deletes) in surface 1, to point 6 in surface 2.
+RESTRICTED = (
+    "Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {1, 1, 0}; Point(4) = {0, 1, 0};\n"
+    "Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 1};\n"
+    "Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};\n"
+    "Point(5) = {1, 0, 0}; Point(6) = {2, 0, 0}; Point(7) = {2, 1, 0}; Point(8) = {1, 1, 0};\n"
+    "Line(5) = {5, 6}; Line(6) = {6, 7}; Line(7) = {7, 8}; Line(8) = {8, 5};\n"
+    "Curve Loop(2) = {5, 6, 7, 8}; Plane Surface(2) = {2};\n"
+    "Field[1] = Distance; Field[1].CurvesList = {8};\n"
+    "Field[2] = Threshold; Field[2].InField = 1; Field[2].SizeMin = 0.02;\n"
+    "Field[2].SizeMax = 0.2; Field[2].DistMin = 0.1; Field[2].DistMax = 0.5;\n"
+    "Field[3] = Restrict; Field[3].InField = 2; Field[3].SurfacesList = {1};\n"
+    "Field[4] = Distance; Field[4].PointsList = {6};\n"
+    "Field[5] = Threshold; Field[5].InField = 4; Field[5].SizeMin = 0.03;\n"
+    "Field[5].SizeMax = 0.25; Field[5].DistMin = 0.1; Field[5].DistMax = 0.5;\n"
+    "Field[6] = Restrict; Field[6].InField = 5; Field[6].SurfacesList = {2};\n"
+    "Field[6].CurvesList = {5, 6, 7, 8};\n"
+    "Field[7] = Min; Field[7].FieldsList = {3, 6};\n"
+    "Background Field = 7;\n")
+# The unit square turned 30° about the x axis: in the plane y sin 30° = z cos 30°.
+TILTED_SQUARE = (
+    "c = Cos(Pi/6); s = Sin(Pi/6);\n"
+    "Point(1) = {0, 0, 0}; Point(2) = {1, 0, 0}; Point(3) = {1, c, s}; Point(4) = {0, c, s};\n"
+    "Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 1};\n"
+    "Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};\n")
+# A 2 x 1 plate with a hole of radius 0.2, turned about (1, 1, 0) and lifted (OpenCASCADE).
+TILTED_PLATE = (
+    'SetFactory("OpenCASCADE");\n'
+    "Rectangle(1) = {0, 0, 0, 2, 1}; Disk(2) = {0.5, 0.5, 0, 0.2};\n"
+    "BooleanDifference(3) = {Surface{1}; Delete;}{Surface{2}; Delete;};\n"
+    "Rotate {{1, 1, 0}, {0, 0, 0}, Pi/5} { Surface{3}; }\n"
+    "Translate {0, 0, 3} { Surface{3}; }\n")
+VNOTCH = Path(__file__).parents[2] / "benchmarks" / "shapes" / "vnotch_plate.geo"
+
+
+def _main_ok(args, capsys) -> int:
+    """The status of ``cli.main(args)``, checked to print no error line and no traceback."""
+    status = cli.main(args)
+    err = capsys.readouterr().err
+    assert ERROR not in err and "Traceback" not in err, err
+    return status
+
+
+def _limit_address_space():  # in the child, before it runs
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (CHILD_ADDRESS_SPACE, CHILD_ADDRESS_SPACE))
+
+
+def run_cli_limited(*args, cwd, mpi=False, timeout=90):
+    """:func:`run_cli` under :data:`CHILD_ADDRESS_SPACE` (each rank) and ``timeout``."""
+    return subprocess.run([*_command(mpi), *map(str, args)], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout, env=_env(), check=False,
+                          preexec_fn=_limit_address_space)
+
+
+def _special_files(folder: Path) -> None:
+    """The special inputs of :func:`test_cli_special_files_are_refused`, in ``folder``."""
+    os.mkfifo(folder / "fifo.msh")
+    os.mkfifo(folder / "fifo.geo")
+    (folder / "zero.msh").symlink_to("/dev/zero")
+    (folder / "random.geo").symlink_to("/dev/urandom")
+    (folder / "zero.geo").symlink_to("/dev/zero")
+    (folder / "folder.geo").mkdir()
+    (folder / "includes_zero.geo").write_text(TRIANGLE + 'Include "zero.geo";\n')
+    (folder / "merges_fifo.geo").write_text(TRIANGLE + 'Merge "fifo.msh";\n')
+    (folder / "resume" / "checkpoint").mkdir(parents=True)
+    os.mkfifo(folder / "resume" / "checkpoint" / "state.npz")
+
+
+SPECIAL_FILES = [
+    (["fifo.msh"], ["'fifo.msh'", "FIFO", "regular file"]),
+    (["fifo.geo"], ["'fifo.geo'", "FIFO"]),
+    (["zero.msh"], ["'zero.msh'", "character device"]),
+    (["random.geo"], ["'random.geo'", "character device"]),
+    (["folder.geo"], ["'folder.geo'", "a folder"]),
+    (["includes_zero.geo"], ["zero.geo", "character device"]),
+    (["merges_fifo.geo"], ["fifo.msh", "FIFO"]),
+    (["annulus", "--resume", "resume"], ["holds no checkpoint"]),
+]
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("mpi", [False, pytest.param(True, marks=needs_mpirun)],
+                         ids=["serial", "mpirun"])
+def test_cli_special_files_are_refused(mpi, tmp_path):
+    _special_files(tmp_path)
+    before = tree(tmp_path)
+    for args, words in SPECIAL_FILES:
+        started = time.monotonic()
+        out = [] if "--resume" in args else ["--out", "o"]
+        proc = run_cli_limited("solve", *args, *COARSE, "-q", *out, cwd=tmp_path, mpi=mpi)
+        assert_one_line_error(proc, 1, *words)
+        assert time.monotonic() - started < 60
+        assert tree(tmp_path) == before, args  # nothing written, nothing left behind
+
+
+@pytest.mark.parametrize(
+    "name, size, extra, words",
+    [("huge.geo", 65 * 2**20, [], ["68157440 bytes", "not read"]),
+     ("huge.msh", 65 * 2**20, ["--max-triangles", "1000"], ["68157440 bytes", "1e+03 triangles"]),
+     ("huge.step", 1025 * 2**20, [], ["bytes", "not read"])],
+    ids=["geo", "msh", "step"],
+)
+def test_oversized_files_are_refused_unread(name, size, extra, words, shared_tmp, capsys,
+                                            monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        with open(shared_tmp / name, "wb") as f:  # sparse: no disk used, nothing to read
+            f.truncate(size)
+    COMM.Barrier()
+    before = tree(shared_tmp)
+    status, line = _main_error(["solve", name, *COARSE, "-q", *extra], capsys)
+    assert status == 1
+    if line is not None:
+        for word in [name, *words]:
+            assert word in line, line
+    assert tree(shared_tmp) == before
+
+
+@pytest.mark.parametrize("limit", ["10", "2.5"])
+@pytest.mark.parametrize("shape, triangles", [("annulus", "2.2e+03"), ("piano", "1.8e+03")])
+def test_max_triangles_holds_for_builtin_shapes(shape, triangles, limit, shared_tmp, capsys,
+                                                monkeypatch):
+    # The estimate: the shape's area over that of an equilateral triangle of edge 0.05.
+    monkeypatch.chdir(shared_tmp)
+    status, line = _main_error(["solve", shape, "--max-triangles", limit, "-q"], capsys)
+    assert status == 1
+    if line is not None:
+        assert f"about {triangles} triangles, more than the limit {float(limit):g}" in line, line
+    assert list(shared_tmp.iterdir()) == []
+
+
+def test_quad_count_is_refused_before_the_solve(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    started = time.monotonic()
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--quads", "--quad-size",
+                                "1e-4"], capsys)
+    assert status == 1
+    assert time.monotonic() - started < 30
+    if line is not None:  # about the annulus' area 3π/4 over 1e-8 (its mesh's polygon)
+        found = re.search(r"gives about (\S+) quads, more than the limit 2e\+06", line)
+        assert found and float(found.group(1)) == pytest.approx(0.75 * np.pi / 1e-8, rel=0.05)
+        assert "--quad-size" in line and "--max-quads" in line, line
+    assert list(shared_tmp.iterdir()) == []
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--param", "--quad-size",
+                                "0.05", "--max-quads", "100"], capsys)
+    assert status == 1  # about 940 quads over a lowered limit
+    if line is not None:
+        found = re.search(r"gives about (\S+) quads, more than the limit 100:", line)
+        assert found and float(found.group(1)) == pytest.approx(0.75 * np.pi / 0.05**2, rel=0.05)
+    assert list(shared_tmp.iterdir()) == []
+
+
+def test_memory_estimate_is_refused_before_the_solve(shared_tmp, capsys, monkeypatch):
+    from ufl_frames.app import run as runs
+
+    monkeypatch.chdir(shared_tmp)
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--max-memory", "0.1"],
+                               capsys)
+    assert status == 1
+    if line is not None:
+        found = re.search(r"needs about (\S+) GiB \((\d+) triangles, 0 quads\), more than the "
+                          r"limit \(0\.1 GiB\)", line)
+        assert found, line
+        need = runs.estimated_memory(int(found.group(2)), 0) / 2**30
+        assert float(found.group(1)) == pytest.approx(need, rel=1e-2)
+        assert "--max-memory" in line
+    assert list(shared_tmp.iterdir()) == []
+    monkeypatch.setattr(runs, "available_memory", lambda: 2.0**28)  # a machine of 256 MiB
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--quads"], capsys)
+    assert status == 1
+    if line is not None:
+        assert "more than the memory available (0.25 GiB)" in line, line
+    assert list(shared_tmp.iterdir()) == []
+    assert cli.main(["solve", "annulus", *COARSE, "-q", "--max-memory", "64", "--out", "o"]) == 0
+
+
+def _read_back(folder: Path):
+    """(points (n, 2), cells (m, 3)) of the frame field written in ``folder``."""
+    data = output.read_vtk(folder / "frames.pvd")
+    return data["points"][:, :2], data["cells"]
+
+
+def _areas(x, cells):
+    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def test_vnotch_plate_is_not_refused(shared_tmp, capsys, monkeypatch):
+    out = shared_tmp / "o"
+    assert _main_ok(["solve", str(VNOTCH), "--max-it", "3", "-q", "--out", out], capsys) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    check = summary["poincare_hopf"]
+    assert check["euler_characteristic"] == 1 - 3  # one surface, three holes
+    # The notch's tip: 360° less the notch's opening 2 atan(0.001 / 0.3).
+    tip = 360 - 2 * np.degrees(np.arctan(0.001 / 0.3))
+    assert max(check["corner_angles_deg"]) == pytest.approx(tip, abs=1e-4)
+    if COMM.rank == 0:  # the plate less the notch's triangle and the holes
+        x, cells = _read_back(out)
+        exact = 4 - 0.5 * 0.002 * 0.3 - np.pi * (2 * 0.15**2 + 0.1**2)
+        # the holes are polygons inscribed in their circles (>= 12 points per turn)
+        assert exact < _areas(x, cells).sum() < exact + 0.01
+
+
+def test_restricted_size_fields_on_duplicated_curves(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "restricted.geo").write_text(RESTRICTED)
+    COMM.Barrier()
+    # was: "Gmsh crashed on 'restricted.geo' (killed by SIGABRT)"
+    assert _main_ok(["solve", "restricted.geo", "--max-it", "3", "-q", "--out", "o"],
+                    capsys) == 0
+    summary = json.loads((shared_tmp / "o" / "summary.json").read_text())
+    assert "2 surfaces meshed as one domain" in summary["loader_notes"][0]
+    if COMM.rank == 0:
+        x, cells = _read_back(shared_tmp / "o")
+        assert _areas(x, cells).sum() == pytest.approx(2.0, rel=1e-12)
+        centre = x[cells].mean(axis=1)
+        edges = np.linalg.norm(x[cells] - x[np.roll(cells, 1, axis=1)], axis=2).max(axis=1)
+        # Field 3 (SizeMin 0.02 within 0.1 of the shared side, in surface 1) still acts:
+        # its curve 8 is now curve 2. Far from both fields: SizeMax 0.2.
+        near = (centre[:, 0] > 0.93) & (centre[:, 0] < 0.99) & (centre[:, 1] > 0.2) \
+            & (centre[:, 1] < 0.8)
+        far = (centre[:, 0] < 0.35) & (centre[:, 1] > 0.2) & (centre[:, 1] < 0.8)
+        assert near.any() and far.any()
+        assert edges[near].max() < 0.05 < 0.1 < edges[far].mean()
+
+
+@pytest.mark.parametrize(
+    "text, area, corners",
+    [(TILTED_SQUARE, 1.0, 4), (TILTED_PLATE, 2 - np.pi * 0.2**2, 4)],
+    ids=["square", "plate-with-hole"],
+)
+def test_tilted_plane_is_meshed_in_its_plane(text, area, corners, shared_tmp, capsys,
+                                             monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "tilted.geo").write_text(text)
+    COMM.Barrier()
+    assert _main_ok(["solve", "tilted.geo", "--max-it", "5", "-q", "--out", "o"], capsys) == 0
+    summary = json.loads((shared_tmp / "o" / "summary.json").read_text())
+    assert any("tilted plane" in note for note in summary["loader_notes"])
+    assert summary["poincare_hopf"]["corners"] == corners
+    assert summary["poincare_hopf"]["agrees"]
+    if COMM.rank == 0:  # lengths and areas kept: a rotation, not a projection
+        x, cells = _read_back(shared_tmp / "o")
+        found = _areas(x, cells).sum()
+        assert area - 1e-9 <= found < area + 0.01  # the hole: a polygon inscribed in it
+        if corners == 4 and area == 1.0:
+            assert found == pytest.approx(1.0, rel=1e-12)
+            assert np.ptp(x, axis=0) == pytest.approx([1.0, 1.0], rel=1e-12)
+
+
+def test_non_planar_mesh_is_refused(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:  # a square folded along its diagonal
+        (shared_tmp / "folded.msh").write_text(
+            "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 1 1 0.5\n"
+            "4 0 1 0\n$EndNodes\n$Elements\n2\n1 2 2 0 1 1 2 4\n2 2 2 0 1 2 3 4\n$EndElements\n")
+    COMM.Barrier()
+    status, line = _main_error(["solve", "folded.msh", "--max-it", "3", "-q"], capsys)
+    assert status == 1
+    if line is not None:
+        assert "'folded.msh' is not planar" in line, line
+    assert sorted(p.name for p in shared_tmp.iterdir()) == ["folded.msh"]
+
+
+def test_failed_quads_keep_the_field(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "sliver.geo").write_text(SLIVER)
+    COMM.Barrier()
+    status = cli.main(["solve", "sliver.geo", "--max-it", "10", "--quads", "--out", "o"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1
+    errors = [line for line in err if line.startswith(ERROR)]
+    assert len(errors) == (1 if COMM.rank == 0 else 0), err
+    if errors:
+        assert errors[0].startswith(f"{ERROR}the quad mesh failed: cannot make quads"), errors
+        assert errors[0].endswith("the frame field and summary.json were written to 'o' "
+                                  "without it"), errors
+        assert any("warning: the quad mesh failed" in line for line in err), err
+    out = shared_tmp / "o"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["missing"]["quads"].startswith("cannot make quads")
+    assert "quads" not in summary
+    assert set(summary["files"]) == {p.name for p in out.iterdir()}
+    assert {"frames.png", "convergence.png", "frames.pvd"} <= set(summary["files"])
+    assert not any(name.startswith("quads") for name in summary["files"])
+    assert_nothing_partial(shared_tmp)
+
+
+def test_a_figure_that_fails_is_skipped(shared_tmp, capsys, monkeypatch):
+    def overflow(*args, **kwargs):
+        raise RuntimeError("FT_Render_Glyph (ft2font_wrapper.cpp line 1947) failed with "
+                           "error 0x62: raster overflow")
+
+    monkeypatch.setattr(figures, "_frames_figure", overflow)
+    out = shared_tmp / "o"
+    assert cli.main(["solve", "annulus", *COARSE, "--out", out]) == 0
+    err = capsys.readouterr().err
+    if COMM.rank == 0:
+        assert "warning: frames.png could not be drawn (RuntimeError: FT_Render_Glyph" in err
+        assert ERROR not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["missing"] == {"frames.png": "could not be drawn: RuntimeError: "
+                                  "FT_Render_Glyph (ft2font_wrapper.cpp line 1947) failed "
+                                  "with error 0x62: raster overflow"}
+    assert "frames.png" not in summary["files"] and not (out / "frames.png").exists()
+    assert set(summary["files"]) == {p.name for p in out.iterdir()}
+    assert_nothing_partial(shared_tmp)
+
+
+@pytest.mark.parametrize("length", [1000.0, 1e5])
+def test_frame_figure_of_a_thin_strip(length, shared_tmp):
+    import dolfinx
+    import dolfinx.fem as fem
+
+    mesh = dolfinx.mesh.create_rectangle(COMM, [[0, 0], [length, 1]], [200, 2])
+    q = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (5,))))
+    q.x.array[:] = np.tile([1.0, 0, 0, 0, 0], q.x.array.size // 5)
+    layout = figures.frame_layout((0, 0), (length, 1), title="t")
+    assert not layout.equal and min(layout.axes_size) == figures.AXES_SHORT_MIN_IN
+    output.plot_frames(shared_tmp / "strip.png", q, title="strip")  # raised in FreeType
+    if COMM.rank == 0:
+        from PIL import Image
+
+        with Image.open(shared_tmp / "strip.png") as image:
+            width, height = image.size
+        assert width > 5 * height and height < 2**12
+
+
+def test_thin_strip_with_quads_is_written_whole(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        (shared_tmp / "strip.geo").write_text(
+            "Point(1) = {0, 0, 0}; Point(2) = {1000, 0, 0}; Point(3) = {1000, 1, 0};\n"
+            "Point(4) = {0, 1, 0}; Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4};\n"
+            "Line(4) = {4, 1}; Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};\n")
+    COMM.Barrier()
+    assert _main_ok(["solve", "strip.geo", "--mesh-size", "0.5", "--max-it", "5", "--quads",
+                     "-q", "--out", "o"], capsys) == 0
+    summary = json.loads((shared_tmp / "o" / "summary.json").read_text())
+    assert summary["missing"] == {}
+    assert {"frames.png", "quads.png", "quads.msh"} <= set(summary["files"])
+    found = summary["quads"]
+    assert found["valid"]
+    # A 1000 x 1 rectangle in quads of edge s: round(1 / s) rows of 1000 / s.
+    size = found["quad_size"]
+    assert found["quads"] == pytest.approx(round(1 / size) * 1000 / size, rel=0.02)
+
+
+@pytest.mark.parametrize(
+    "damage, words",
+    [("truncated", ["truncated or not a checkpoint"]),
+     ("empty", ["truncated or not a checkpoint"]),
+     ("nan", ["NaN or infinite values in 2 of its"]),
+     ("no-q", ["lacks its meta or q record"]),
+     ("flags", ["active flags of shape (3,)"])],
+)
+def test_damaged_checkpoints_are_named(damage, words, shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    if COMM.rank == 0:
+        folder = shared_tmp / "o" / "checkpoint"
+        folder.mkdir(parents=True)
+        path = folder / "state.npz"
+        meta = np.array(json.dumps({"format": checkpoint.FORMAT, "run": {}}))
+        q = np.ones((40, 5))
+        if damage == "nan":
+            q[3, 1], q[7, 0] = np.nan, np.inf
+        arrays = {"meta": meta, "q": q}
+        if damage == "no-q":
+            del arrays["q"]
+        if damage == "flags":
+            arrays["active"] = np.zeros(3, np.int8)
+        np.savez(path, **arrays)
+        if damage == "truncated":
+            path.write_bytes(path.read_bytes()[:300])
+        if damage == "empty":
+            path.write_bytes(b"")
+    COMM.Barrier()
+    before = tree(shared_tmp)
+    status, line = _main_error(["solve", "annulus", *COARSE, "-q", "--resume", "o"], capsys)
+    assert status == 1
+    if line is not None:
+        assert "cannot resume: the checkpoint 'o/checkpoint/state.npz'" in line, line
+        for word in words:
+            assert word in line, line
+        assert "internal error" not in line
+    assert tree(shared_tmp) == before
+
+
+def test_unused_petsc_options_are_warned_about(shared_tmp, capsys, monkeypatch):
+    monkeypatch.chdir(shared_tmp)
+    assert cli.main(["solve", "annulus", *COARSE, "--out", "o", "-tao_nls_ksp_type", "cg",
+                     "-tao_mnitor", "-foo_bar", "1"]) == 0
+    err = capsys.readouterr().err
+    if COMM.rank == 0:
+        assert ("warning: PETSc options -tao_mnitor, -foo_bar were not used by any solver of "
+                "the run (misspelt?)") in err, err
+        assert "-tao_nls_ksp_type" not in err
+    assert (shared_tmp / "o" / "summary.json").is_file()
+
+
+def test_signal_thread_survives_spurious_wakeups(monkeypatch):
+    import threading
+
+    class Woken:  # what sigtimedwait returns when a profiler attaches (ptrace)
+        si_signo = 34606144
+
+    calls = []
+
+    def sigtimedwait(signals, timeout):
+        calls.append(1)
+        if len(calls) <= 3:
+            return Woken()
+        time.sleep(timeout)
+        return None
+
+    monkeypatch.setattr(signal, "sigtimedwait", sigtimedwait)
+    watch = interrupts.SignalWatch(report=lambda text: None)
+    watch._thread = threading.Thread(target=watch._wait, daemon=True)
+    watch._thread.start()
+    while len(calls) < 5:
+        time.sleep(0.01)
+    assert watch._thread.is_alive() and watch.received is None
+    watch._stop.set()
+    watch._thread.join()
+    assert str(interrupts.Interrupted(34606144)) == ("interrupted by signal 34606144; "
+                                                      "nothing written")
+
+
+def test_grace_ends_a_stage_that_does_not_stop_within_two_seconds(monkeypatch):
+    ended = []
+    watch = interrupts.SignalWatch(report=lambda text: None)
+    monkeypatch.setattr(watch, "exit_now", lambda signum: ended.append(time.monotonic()))
+    watch.stage = "the TAO solve (nls)"  # a stage that asks only at its iterates
+    sent = time.monotonic()
+    watch._notify(signal.SIGTERM)
+    while not ended and time.monotonic() - sent < 10:
+        time.sleep(0.01)
+    assert interrupts.INTERRUPT_GRACE_S < 2.0
+    assert ended and ended[0] - sent < 2.0
+
+
+@pytest.mark.serial
+def test_cli_petsc_help_is_reachable(tmp_path):
+    proc = run_cli("solve", "annulus", *COARSE, "-q", "--out", "o", "-help", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "ignored explicit argument" not in proc.stderr
+    assert "-tao_type <now nls" in proc.stdout and "-mbo_ksp_type" in proc.stdout
+    assert "warning" not in proc.stderr or "-help" not in proc.stderr
+    assert (tmp_path / "o" / "summary.json").is_file()
+
+
+def _staging(folder: Path) -> list[str]:
+    return [p.name for p in folder.iterdir() if p.name.startswith(".")]
+
+
+def _rank_pids(marker: str) -> dict[int, int]:
+    """{MPI rank: pid} of the running ``ufl_frames.app`` processes whose command line holds
+    ``marker``."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            cmdline = (entry / "cmdline").read_bytes()
+            environ = (entry / "environ").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"ufl_frames.app" not in cmdline or marker.encode() not in cmdline \
+                or b"mpirun" in cmdline:
+            continue
+        for item in environ:
+            if item.startswith(b"PMI_RANK="):
+                found[int(item[len(b"PMI_RANK="):])] = int(entry.name)
+    return found
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize(
+    "mpi, rank", [(False, 0), pytest.param(True, 0, marks=needs_mpirun),
+                  pytest.param(True, 1, marks=needs_mpirun)],
+    ids=["serial", "mpirun-rank0", "mpirun-rank1"],
+)
+def test_cli_killed_while_writing_leaves_no_staging_folder(mpi, rank, tmp_path):
+    out = f"o{os.getpid()}x{rank}{int(mpi)}"  # names this job among the processes
+    proc = subprocess.Popen([*_command(mpi), "solve", "annulus", "--mesh-size", "0.05",
+                             "--max-it", "3", "-q", "--out", out], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env=_env())
+    try:
+        deadline = time.monotonic() + 120
+        pids = {}
+        while mpi and set(pids) != {0, 1} and time.monotonic() < deadline:
+            pids = _rank_pids(out)  # before the run writes: the write is short
+        while not _staging(tmp_path) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.002)
+        assert _staging(tmp_path), "the run ended before it wrote"
+        if mpi:
+            os.kill(pids[rank], signal.SIGKILL)
+        else:
+            proc.kill()
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode != 0
+    deadline = time.monotonic() + 5
+    while _staging(tmp_path) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _staging(tmp_path) == []  # removed by the staging folder's guard
+    assert not (tmp_path / out).exists()
+
+
+@pytest.mark.serial
+@needs_mpirun
+@pytest.mark.parametrize(
+    "args, words",
+    [(["annulus", "--max-triangles", "10"], ["more than the limit 10"]),
+     (["annulus", "--quads", "--quad-size", "1e-4"], ["quads, more than the limit 2e+06"])],
+    ids=["max-triangles", "max-quads"],
+)
+def test_mpirun_size_limits(args, words, tmp_path):
+    proc = run_cli("solve", *args, "-q", cwd=tmp_path, mpi=True)
+    assert_one_line_error(proc, 1, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.serial
+@needs_mpirun
+def test_mpirun_failed_quads_keep_the_field(tmp_path):
+    (tmp_path / "sliver.geo").write_text(SLIVER)
+    proc = run_cli("solve", "sliver.geo", "--max-it", "10", "--quads", "-q", "--out", "o",
+                   cwd=tmp_path, mpi=True, timeout=300)
+    assert_one_line_error(proc, 1, "the quad mesh failed", "written to 'o' without it")
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["num_processes"] == 2 and "quads" in summary["missing"]
+    assert set(summary["files"]) == {p.name for p in (tmp_path / "o").iterdir()}
+    assert_nothing_partial(tmp_path)
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("mpi", [False, pytest.param(True, marks=needs_mpirun)],
+                         ids=["serial", "mpirun"])
+@pytest.mark.parametrize(
+    "wait_for, signum", [("  it    2 ", signal.SIGINT), ("MBO initial field", signal.SIGTERM)],
+    ids=["tao-sigint", "mbo-sigterm"])
+def test_cli_interrupt_ends_within_two_seconds(mpi, wait_for, signum, tmp_path):
+    status, err, seconds = _interrupt(PIANO, wait_for, signum, tmp_path, mpi=mpi)
+    proc = subprocess.CompletedProcess([], status, "", err)
+    assert_one_line_error(proc, interrupts.INTERRUPTED_STATUS, "interrupted", signum.name)
+    assert seconds < 2.0
+    assert_nothing_partial(tmp_path)

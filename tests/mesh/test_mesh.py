@@ -407,13 +407,25 @@ def test_volume_geometry_rejected(tmp_path):
     raises_one_line("volumes", load, COMM, path)
 
 
-def test_non_planar_and_empty_rejected(tmp_path):
+def test_tilted_plane_meshed_in_it_non_planar_and_empty_rejected(tmp_path):
+    from ufl_frames.fem.scales import area
+
     tilted = tmp_path / "tilted.geo"
     tilted.write_text(
         'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n'
         "Rotate {{1, 0, 0}, {0, 0, 0}, 0.3} { Surface{1}; }\n"
     )
-    raises_one_line("not planar", load, COMM, tilted)
+    domain = load(COMM, tilted, mesh_size=0.2)  # in its own plane: the unit square again
+    assert any("tilted plane" in note for note in domain.notes)
+    assert area(domain.mesh) == pytest.approx(1.0, rel=1e-12)
+    assert sorted(round(c.angle, 9) for c in domain.corners) == [round(np.pi / 2, 9)] * 4
+    bent = tmp_path / "bent.geo"  # two squares in two planes
+    bent.write_text(
+        'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n'
+        "Rectangle(2) = {2, 0, 0, 1, 1};\n"
+        "Rotate {{1, 0, 0}, {0, 0, 0}, 0.3} { Surface{2}; }\n"
+    )
+    raises_one_line("not planar", load, COMM, bent)
     empty = tmp_path / "points.geo"
     empty.write_text("Point(1) = {0, 0, 0};\n")
     raises_one_line("no 2D surface", load, COMM, empty)

@@ -8,6 +8,7 @@ requested mean edge length. The gathered problem is the same on any number of ra
 COMM_SELF and COMM_WORLD give the same mesh. The files read back with Gmsh and DOLFINx.
 """
 
+import json
 from pathlib import Path
 
 import pytest
@@ -98,11 +99,16 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     # the refusal says which smaller size works (the annulus is 0.5 wide: at 2.0 no quad
     # fits across, at 0.7 x 2.0 = 1.4 the layout collapses it to one layer of quads)
     with pytest.raises(RunError, match=r"cannot make quads of this field: .*quad size"
-                       r".*\(quad size 1\.4 works\)"):
+                       r".*\(quad size 1\.4 works\)") as failed:
         run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True, quads=True,
                       quad_size=2.0), comm=COMM)
-    COMM.Barrier()  # rank 0 removes what the run wrote (its checkpoint folder)
-    assert not (out / "b").exists()
+    COMM.Barrier()
+    # the field is not lost to the quads: written with the summary, which says why they lack
+    written = json.loads((out / "b" / "summary.json").read_text())
+    assert written == failed.value.summary
+    assert "(quad size 1.4 works)" in written["missing"]["quads"]
+    assert not any(name.startswith("quads") for name in written["files"])
+    assert set(written["files"]) == {p.name for p in (out / "b").iterdir()}
 
 
 SHAPES = {

@@ -43,7 +43,8 @@ under ``mpirun``) and a status, never a traceback (``UFL_FRAMES_DEBUG=1`` prints
   would act outside the run, a boundary that crosses itself, meshing past
   ``--mesh-time-limit``, an unusable output folder, a ``--resume`` folder without a
   checkpoint of this run, and failures on the way (an MBO or TAO solve PETSc fails, a
-  write error);
+  write error); a stage asked for (``--param``, ``--quads``) that fails, after the field
+  and the summary are written without it;
 * 130, interrupted (SIGINT, Ctrl-C, or SIGTERM): at the next MBO level or TAO iteration,
   or within :data:`ufl_frames.interrupts.INTERRUPT_GRACE_S` seconds, whatever runs
   (meshing at once).
@@ -233,6 +234,12 @@ def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
                        help="w of the sized energy H + w H_s M (default 0.3)")
     solve.add_argument("--quad-count", type=_positive_int, default=None, metavar="N",
                        help="with --quads: about N quads (instead of --quad-size)")
+    solve.add_argument("--max-quads", type=_positive_float, default=None, metavar="N",
+                       help="refuse, before the solve, a --quad-size estimated to give more "
+                       "quads (area / size^2; default 2e6)")
+    solve.add_argument("--max-memory", type=_positive_float, default=None, metavar="GIB",
+                       help="refuse, before the solve, a mesh and quads estimated to need "
+                       "more memory (GiB; default: the memory available)")
     solve.add_argument("--free-singularities", action="store_true",
                        help="let the solver move, create and annihilate singularities "
                        "(default: the cross orientation is held on the MBO field's singular "
@@ -450,6 +457,24 @@ def _quiet_petsc_finalize() -> None:
         db.setValue("options_left", "no")
 
 
+#: PETSc options read by PETSc itself, not by an object of the run: never "unused".
+_PETSC_OWN_OPTIONS = ("help", "options_left", "log_view", "malloc_debug", "info")
+
+
+def _warn_unused(options, comm, quiet: bool) -> None:
+    """Warn (rank 0) about the command line's PETSc options no solver of the run read:
+    misspelt, or for a solver the run does not make (PETSc's ``-options_left``)."""
+    from petsc4py import PETSc
+
+    db = PETSc.Options()
+    unused = [f"-{name}" for name, _ in options
+              if name not in _PETSC_OWN_OPTIONS and not db.used(name)]
+    if unused and not quiet and comm.rank == 0:
+        print(f"{PROG}: warning: PETSc option{'s' if len(unused) > 1 else ''} "
+              f"{', '.join(dict.fromkeys(unused))} {'were' if len(unused) > 1 else 'was'} not "
+              "used by any solver of the run (misspelt?)", file=sys.stderr, flush=True)
+
+
 def _all_failed(agreement, timeout: float) -> bool:
     """Whether every rank of ``agreement`` (a communicator used for nothing else) reaches
     this point within ``timeout`` seconds: an error all ranks met, not one rank's own."""
@@ -489,8 +514,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     try:
         _check_text(argv)
+        # PETSc's -help is not argparse's -h with the value "elp": PETSc's, for the run.
+        petsc_help = [("help", None)] if "-help" in argv else []
+        argv = [a for a in argv if a != "-help"]
         args, extras = build_parser().parse_known_args(argv)
-        options = split_petsc_options(extras)
+        options = split_petsc_options(extras) + petsc_help
         if args.command is None:
             raise UsageError("missing command: use 'solve', 'mesh' or 'info' (see ufl-frames "
                              "--help)")
@@ -530,6 +558,7 @@ def main(argv: list[str] | None = None) -> int:
                 try:
                     run(_mesh_config(args) if args.command == "mesh"
                         else RunConfig.from_args(args), comm=comm)
+                    _warn_unused(options, comm, args.quiet)
                 except Exception as e:
                     watch.stage = "reporting the failure"
                     status = _report_failure(e, comm, agreement)

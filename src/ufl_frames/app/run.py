@@ -9,7 +9,6 @@ Importing this module starts nothing (no PETSc, no DOLFINx): :func:`run` starts 
 (without command-line options, unless the caller started it first) when it is called.
 """
 
-import hashlib
 import math
 import os
 import re
@@ -24,11 +23,30 @@ from ufl_frames.bootstrap import init_petsc, options_scope
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
 from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
 
-__all__ = ["RunConfig", "check_output_folder", "default_output_folder", "run"]
+__all__ = ["IncompleteRun", "RunConfig", "check_output_folder", "default_output_folder",
+           "estimated_quads", "run"]
 
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.mesh.load
 DEFAULT_MAX_IT = 500
+#: Largest estimated quad count (the domain's area over the squared ``quad_size``) made
+#: without asking (``max_quads``); the quad stage's memory grows with it.
+MAX_QUADS = 2_000_000
+#: What a run's peak memory grows by per triangle of its mesh and per quad of its quad
+#: stage, and what it takes at least (bytes; serial runs on the annulus, 3.5e4 to 1.4e5
+#: triangles and 2.6e5 to 1e6 quads, rounded up): :func:`estimated_memory`.
+BYTES_PER_TRIANGLE = 6000
+BYTES_PER_QUAD = 1200
+BASE_BYTES = 300 * 2**20
+
+
+class IncompleteRun(RunError):
+    """The run wrote its results, but a stage that was asked for failed and is missing
+    from them (exit status 1; ``summary`` is what was written)."""
+
+    def __init__(self, message: str, summary: dict):
+        super().__init__(message)
+        self.summary = summary
 
 
 @dataclass(frozen=True)
@@ -60,6 +78,8 @@ class RunConfig:
     param: bool = False
     quads: bool = False
     quad_size: float | None = None
+    max_quads: float | None = None
+    max_memory: float | None = None
     quiet: bool = False
     #: The quads' count asked for instead of their size (the stage scales the size to it).
     quad_count: int | None = None
@@ -255,11 +275,73 @@ def _check_config(config: RunConfig, petsc_options: dict) -> None:
                          "directions")
     if config.quad_count is not None and not config.quads:
         raise InputError("--quad-count needs --quads")
-    if config.quad_count is not None and config.quad_size is not None:
-        raise InputError("--quad-count and --quad-size both set the quads' size: give one")
+    for name in ("quad_size", "max_quads", "max_memory"):
+        value = getattr(config, name)
+        if value is not None and not (_finite_real(value) and value > 0):
+            raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value!r}")
     problem = petsc_option_problem(petsc_options)
     if problem is not None:
         raise InputError(problem)
+
+
+def estimated_quads(area: float, quad_size: float) -> float:
+    """Quads of mean edge ``quad_size`` that cover ``area``: ``area / quad_size²``."""
+    return area / (quad_size * quad_size)
+
+
+def estimated_memory(triangles: float, quads: float) -> float:
+    """Bytes a run of ``triangles`` triangles and ``quads`` quads needs at its peak, all
+    processes together (:data:`BASE_BYTES`, :data:`BYTES_PER_TRIANGLE`,
+    :data:`BYTES_PER_QUAD`)."""
+    return BASE_BYTES + BYTES_PER_TRIANGLE * triangles + BYTES_PER_QUAD * quads
+
+
+def available_memory() -> float | None:
+    """Bytes of memory available now (``MemAvailable`` of ``/proc/meminfo``; None where
+    it cannot be read)."""
+    try:
+        with open("/proc/meminfo", "rb") as f:
+            for line in f.read(65536).decode("ascii", "replace").splitlines():
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def _check_sizes(config: RunConfig, domain, comm) -> None:
+    """Raise :class:`InputError` (collective) before the field is solved where
+    ``quad_size`` asks for more quads than ``max_quads`` (default :data:`MAX_QUADS`), or
+    the mesh and the quads would need more memory (:func:`estimated_memory`) than
+    ``max_memory`` GiB (default: what :func:`available_memory` says on rank 0)."""
+    from ufl_frames.fem.scales import area
+
+    quads = 0.0
+    if config.param or config.quads:
+        total = area(domain.mesh)
+        size = domain.mesh_size if config.quad_size is None else config.quad_size
+        quads = (estimated_quads(total, size) if config.quad_count is None
+                 else float(config.quad_count))
+        limit = MAX_QUADS if config.max_quads is None else config.max_quads
+        if config.quad_count is not None and quads > limit:
+            raise InputError(f"{config.quad_count} quads asked for, more than the limit "
+                             f"{limit:.3g} (raise --max-quads)")
+        if config.quad_size is not None and quads > limit:
+            raise InputError(
+                f"quad size {config.quad_size:g} on a domain of area {total:.3g} gives about "
+                f"{quads:.2g} quads, more than the limit {limit:.3g}: choose a larger "
+                "--quad-size (or raise --max-quads)")
+    need = estimated_memory(domain.num_cells, quads)
+    if config.max_memory is not None:
+        limit, which = config.max_memory * 2**30, "the limit"
+    else:
+        limit, which = comm.bcast(available_memory() if comm.rank == 0 else None, root=0), \
+            "the memory available"
+    if limit is not None and need > limit:
+        raise InputError(
+            f"the run needs about {need / 2**30:.3g} GiB ({domain.num_cells} triangles, "
+            f"{quads:.2g} quads), more than {which} ({limit / 2**30:.3g} GiB): choose a "
+            "larger --mesh-size or --quad-size (or set --max-memory)")
 
 
 #: PETSc options that change what a run prints, not what it computes: not compared
@@ -288,11 +370,12 @@ def run_record(config: RunConfig, comm, petsc_options: dict) -> dict:
     geometry, identity = config.geometry, None
     if geometry in geometry_module.KNOWN_GEOMETRIES:
         identity = geometry
-    elif comm.rank == 0:
-        try:
-            identity = "sha256:" + hashlib.sha256(Path(geometry).read_bytes()).hexdigest()
-        except OSError:
-            identity = None  # meshing reports it
+    elif comm.rank == 0:  # None: not a regular file, too large or unreadable (meshing says)
+        from ufl_frames.mesh.files import file_digest
+        from ufl_frames.mesh.meshing import MAX_TRIANGLES
+
+        limit = MAX_TRIANGLES if config.max_triangles is None else config.max_triangles
+        identity = file_digest(geometry, limit)
     identity = comm.bcast(identity, root=0)
     record = {"geometry": geometry, "geometry_id": identity}
     for name in ("isotropic", "mesh_size", "size_factor", "max_triangles", "max_aspect",
@@ -369,10 +452,14 @@ def run(config: RunConfig, comm=None) -> dict:
             input is unusable (a :class:`ufl_frames.mesh.GeometryError`, a bad
             parameter or PETSc option in the database, an existing non-empty output
             folder, a coarse level of a given ``levels`` that fails or loses a hole).
-        RunError: a solve, a stage or writing the results fails on every rank alike
-            (a PETSc error, no valid quad mesh at the size, a full disk).
+        RunError: a solve or writing the results fails on every rank alike (a PETSc
+            error, a full disk).
+        IncompleteRun: a stage asked for (the map, the quads) failed (no valid quad mesh
+            at the size): the field, its figures and the summary (its ``missing`` says
+            what and why) are written all the same, and the summary is the exception's.
 
-    Other exceptions are bugs and keep their type. The output folder is written whole or
+    A figure that cannot be drawn is left out with a warning (``missing`` in the
+    summary). Other exceptions are bugs and keep their type. The output folder is written whole or
     not at all (:class:`ufl_frames.output.OutputFolder`). PETSc options in the database
     (``-tao_type`` ...) are honoured; the defaults the solvers add to the database are
     removed afterwards.
@@ -394,6 +481,7 @@ def run(config: RunConfig, comm=None) -> dict:
     check_output_folder(out, config.force, comm, resuming=config.resume is not None)
     domains = _mesh(config, comm, say)
     domain = domains[-1]
+    _check_sizes(config, domain, comm)
     interrupts.set_stage("the MBO initial field")
     interrupts.raise_if_interrupted(comm)
     for note in domain.notes:
@@ -411,7 +499,7 @@ def run(config: RunConfig, comm=None) -> dict:
         solve.solve(domains)
         solve.report()
         solve.stages()
-        return solve.write(start, petsc_options)
+        summary = solve.write(start, petsc_options)
     except KeyboardInterrupt:  # Interrupted too: the checkpoint, if any, is for --resume
         raise
     except BaseException:
@@ -419,6 +507,8 @@ def run(config: RunConfig, comm=None) -> dict:
         raise
     finally:
         interrupts.note_checkpoint(None)
+    solve.check_complete(summary)
+    return summary
 
 
 def size_target(config: RunConfig, comm):
@@ -490,6 +580,8 @@ class _Solve:
         self.max_it = config.max_it  # -tao_max_it wins
         self.param = self.quads = None  # the stages' records
         self.size_target = None  # the solve's SizeTarget (None: H alone)
+        self.missing: dict[str, str] = {}  # what was asked for and is not written: why
+        self.skipped: list[tuple[str, str]] = []  # figures that could not be drawn
         self._finest_space = None
         self._levels = 1
 
@@ -665,34 +757,61 @@ class _Solve:
         config, say = self.config, self.say
         root = None
         if config.param:
-            with failures("the parametrisation"):
-                root = stages.RootField(self.field)
-                self.param = stages.parametrise(root, quad_size=config.quad_size)
+            try:
+                with failures("the parametrisation"):
+                    root = stages.RootField(self.field)
+                    self.param = stages.parametrise(root, quad_size=config.quad_size)
+            except RunError as e:  # the same on every rank: the field is written without it
+                self._stage_failed("param", "the parametrisation", e)
+            interrupts.raise_if_interrupted(self.comm)
+        if self.param is not None:
             quality = self.param.quality
             say(f"parametrisation: misfit {quality['misfit']:.4f}, "
                 f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
                 f"of length {quality['cut_length']:.3g}")
-            interrupts.raise_if_interrupted(self.comm)
         if config.quads:
             interrupts.set_stage("the quad mesh")
             quad_size = self._quad_size()
             say("quad mesh ..." if config.quad_count is None else
                 f"quad mesh ({config.quad_count} quads: size {quad_size:.3g}) ...")
-            with failures("the quad mesh"):
-                try:
-                    root = stages.RootField(self.field) if root is None else root
-                    self.quads = stages.quadrangulate(root, quad_size=config.quad_size,
-                                                      quad_count=config.quad_count)
-                except ValueError as e:  # no valid integer-grid map: the same on every rank
-                    raise RunError(str(e)) from e
-            if config.on_cad:
+            try:
+                with failures("the quad mesh"):
+                    try:
+                        root = stages.RootField(self.field) if root is None else root
+                        self.quads = stages.quadrangulate(root, quad_size=config.quad_size,
+                                                          quad_count=config.quad_count)
+                    except ValueError as e:  # no valid integer-grid map: alike on every rank
+                        raise RunError(str(e)) from e
+            except RunError as e:  # the same on every rank: the field is written without it
+                self._stage_failed("quads", "the quad mesh", e)
+            interrupts.raise_if_interrupted(self.comm)
+            if self.quads is not None and config.on_cad:
                 self._onto_cad()
+        if self.quads is not None:
             found = self.quads.quality
             say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
                 f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
                 + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
-            interrupts.raise_if_interrupted(self.comm)
+
+    def _stage_failed(self, key: str, stage: str, error: BaseException) -> None:
+        """Record that ``stage`` (summary key ``key``) failed with ``error``, and warn: the
+        run goes on to write the field without it, and ends with status 1."""
+        reason = str(error).removeprefix(f"{stage} failed: ")
+        self.missing[key] = reason
+        warn(self.comm, self.config.quiet, f"{stage} failed; the frame field is written "
+             "without it (the reason ends the run)")
+
+    def check_complete(self, summary: dict) -> None:
+        """Raise :class:`IncompleteRun` where a stage asked for is missing from the
+        results written (their summary ``summary``)."""
+        if not self.missing:
+            return
+        what = {"param": "the parametrisation", "quads": "the quad mesh"}
+        key, reason = next(iter(self.missing.items()))
+        raise IncompleteRun(
+            f"{what[key]} failed: {reason}; the frame field and summary.json were written to "
+            f"{str(self.out)!r} without it", summary)
 
     def _quad_size(self) -> float | None:
         """The quad size asked for: ``quad_size``, or sqrt(area / ``quad_count``)."""
@@ -787,15 +906,19 @@ class _Solve:
         from ufl_frames.pipeline import files
 
         label, comm = self.config.label, self.comm
+        skipped = self.skipped
         names = []
         if self.config.field_files:
             names += files.write_field(staging, self.field, label=label,
-                                       tao_type=self.tao_type)
+                                       tao_type=self.tao_type, skipped=skipped)
         if self.param is not None:
-            names += files.write_param(staging, self.param, label, comm)
+            names += files.write_param(staging, self.param, label, comm, skipped=skipped)
         if self.quads is not None:
             names += files.write_quads(staging, self.quads, label, comm,
-                                       groups=self.field.domain.physical_groups)
+                                       groups=self.field.domain.physical_groups,
+                                       skipped=skipped)
+        for name, reason in skipped:
+            warn(comm, self.config.quiet, f"{name} could not be drawn ({reason}): left out")
         return [*names, "summary.json"]
 
     def size_summary(self) -> dict | None:
@@ -842,6 +965,8 @@ class _Solve:
             "resumed_from_iteration": None if self.state is None else self.state.iterations,
             **findings_record(self.field, self.param, self.quads),
             "sizes": self.size_summary(),
+            "missing": {**self.missing, **{name: f"could not be drawn: {reason}"
+                                           for name, reason in self.skipped}},
             "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
             "files": files,
         }

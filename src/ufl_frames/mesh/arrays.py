@@ -190,6 +190,52 @@ class MeshArrays:
         return np.concatenate([self.boundary_curve[tagged], self.interior_curve])
 
 
+def plane_frame(xyz: np.ndarray, source: str):
+    """The plane the points lie in: None where it is z = const (within 1e-8 of their
+    extent), else (origin, e1, e2): a point and two orthonormal axes of the plane, e1
+    along its intersection with z = const (x's direction if it is horizontal-ish),
+    e1 × e2 the normal with a positive z (or y) component.
+
+    Raises:
+        GeometryError: the points lie in no plane.
+    """
+    xyz = np.asarray(xyz, dtype=float).reshape(-1, 3)
+    scale = max(float(np.abs(xyz).max(initial=0.0)), 1e-300)
+    z = xyz[:, 2]
+    if xyz.shape[0] == 0 or float(z.max() - z.min()) <= 1e-8 * scale:
+        return None
+    origin = xyz.mean(axis=0)
+    _, sigma, vt = np.linalg.svd(xyz - origin, full_matrices=False)
+    normal = vt[-1]
+    if float(np.abs((xyz - origin) @ normal).max()) > 1e-8 * scale:
+        raise GeometryError(f"{source!r} is not planar (its points lie in no one plane)")
+    if normal[2] < 0 or (normal[2] == 0 and normal[1] < 0):
+        normal = -normal
+    e1 = np.cross([0.0, 0.0, 1.0], normal)
+    if np.linalg.norm(e1) < 1e-12:  # horizontal after all
+        e1 = np.array([1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    return origin, e1, e2
+
+
+def plane_coordinates(xyz: np.ndarray, source: str, notes: list[str]) -> np.ndarray:
+    """(n, 2) coordinates of mesh nodes in their plane: x, y where it is z = const, else
+    the coordinates along :func:`plane_frame`'s axes (said in ``notes``)."""
+    frame = plane_frame(xyz, source)
+    if frame is None:
+        return np.ascontiguousarray(xyz[:, :2])
+    origin, e1, e2 = frame
+    notes.append(f"the mesh lies in a tilted plane: meshed in its own coordinates "
+                 f"(u, v) = ((p - o)·e1, (p - o)·e2), o = {_vector(origin)}, "
+                 f"e1 = {_vector(e1)}, e2 = {_vector(e2)}")
+    return np.ascontiguousarray(np.stack([(xyz - origin) @ e1, (xyz - origin) @ e2], axis=1))
+
+
+def _vector(v) -> str:
+    return "(" + ", ".join(f"{float(c):.6g}" for c in v) + ")"
+
+
 def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
     """The current Gmsh mesh as checked arrays: used nodes only, planar, valid cells."""
     if len(surfaces()) > 1:  # touching surfaces of a .msh or of a built-in model
@@ -205,11 +251,7 @@ def mesh_arrays(source: str, notes: list[str]) -> MeshArrays:
     xyz = xyz[used]
     if not np.all(np.isfinite(xyz)):
         raise GeometryError(f"{source!r} has nodes with NaN or infinite coordinates")
-    scale = max(float(np.abs(xyz[:, :2]).max()), 1e-300)
-    z = xyz[:, 2]
-    if float(z.max() - z.min()) > 1e-8 * scale:
-        raise GeometryError(f"{source!r} is not planar in the xy-plane (z varies)")
-    x = np.ascontiguousarray(xyz[:, :2])
+    x = plane_coordinates(xyz, source, notes)
     if np.any((cells[:, 0] == cells[:, 1]) | (cells[:, 1] == cells[:, 2])
               | (cells[:, 0] == cells[:, 2])):
         raise GeometryError(f"{source!r} has triangles with a repeated node")

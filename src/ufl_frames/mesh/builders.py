@@ -33,8 +33,7 @@ def build(
         mesh_size: Built-in shapes take it (default :data:`BUILTIN_MESH_SIZE`) times
             ``size_factor``; for a file as :func:`load`.
         size_factor: Scales the size (< 1 refines).
-        max_triangles: As for :func:`load` (files only: built-in shapes are meshed in
-            this process).
+        max_triangles: As for :func:`load` (built-in shapes too).
         time_limit: As for :func:`load` (files only).
         refinements: With k, Gmsh meshes at 2^k times the size and splits every triangle
             into 4, k times (new boundary points on the curves): the mesh is then a
@@ -51,7 +50,9 @@ def build(
     if key in KNOWN_GEOMETRIES:
         h = BUILTIN_MESH_SIZE if mesh_size is None else check_mesh_size(mesh_size)
         factor = check_positive("size_factor", size_factor)
-        return KNOWN_GEOMETRIES[key](comm, mesh_size=h * factor, refinements=refinements)
+        return KNOWN_GEOMETRIES[key](comm, mesh_size=h * factor, refinements=refinements,
+                                     max_triangles=check_positive("max_triangles",
+                                                                  max_triangles))
     path = Path(key)
     looks_like_file = path.suffix.lower() in GEO_EXTENSIONS + MESH_EXTENSIONS + CAD_EXTENSIONS
     # Decided on rank 0, which reads the file: every rank must take the same branch.

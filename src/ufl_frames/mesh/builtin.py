@@ -37,7 +37,7 @@ from ufl_frames.mesh.domain import (  # noqa: E402
     check_refinements,
     is_real,
 )
-from ufl_frames.mesh.meshing import Sizing, mesh_model  # noqa: E402
+from ufl_frames.mesh.meshing import MAX_TRIANGLES, Sizing, mesh_model  # noqa: E402
 
 #: Mesh size of the built-in geometries when none is given.
 BUILTIN_MESH_SIZE = 0.05
@@ -55,6 +55,7 @@ def annulus(
     r_inner: float = 0.5,
     r_outer: float = 1.0,
     refinements: int = 0,
+    max_triangles: float = MAX_TRIANGLES,
 ) -> Domain:
     """Triangle mesh of the annulus r_inner ≤ |x| ≤ r_outer centred at the origin.
 
@@ -64,6 +65,7 @@ def annulus(
         r_inner: The inner radius.
         r_outer: The outer radius.
         refinements: As for :func:`~ufl_frames.mesh.build`.
+        max_triangles: A size that would give more triangles is refused before meshing.
 
     Returns:
         The distributed domain.
@@ -78,7 +80,7 @@ def annulus(
 
     def make(notes):
         annulus_model(r_inner, r_outer)
-        return mesh_model(Sizing(h, refinements=refinements), notes)
+        return mesh_model(Sizing(h, max_triangles=max_triangles, refinements=refinements), notes)
 
     return create(comm, make, "annulus", cad=True)
 
@@ -92,13 +94,15 @@ def annulus_model(r_inner: float = 0.5, r_outer: float = 1.0) -> None:
     occ.synchronize()
 
 
-def piano(comm: MPI.Comm, mesh_size: float = BUILTIN_MESH_SIZE, refinements: int = 0) -> Domain:
+def piano(comm: MPI.Comm, mesh_size: float = BUILTIN_MESH_SIZE, refinements: int = 0,
+          max_triangles: float = MAX_TRIANGLES) -> Domain:
     """Triangle mesh of the 'piano' outline (module docstring, ``meshes/piano.geo``).
 
     Args:
         comm: The communicator the mesh is distributed over (collective).
         mesh_size: The largest element size.
         refinements: As for :func:`~ufl_frames.mesh.build`.
+        max_triangles: As for :func:`annulus`.
 
     Returns:
         The distributed domain.
@@ -108,7 +112,7 @@ def piano(comm: MPI.Comm, mesh_size: float = BUILTIN_MESH_SIZE, refinements: int
 
     def make(notes):
         piano_model()
-        return mesh_model(Sizing(h, refinements=refinements), notes)
+        return mesh_model(Sizing(h, max_triangles=max_triangles, refinements=refinements), notes)
 
     return create(comm, make, "piano", cad=True)
 

@@ -21,14 +21,22 @@ mesh of the whole planar domain:
   boundary curves cross (:func:`~ufl_frames.mesh.meshing.check_crossings`) before it is
   meshed;
 - reading and meshing run in a child process, stopped after a time limit
-  (:func:`mesh_time_limit`, :class:`~ufl_frames.mesh.domain.MeshTimeLimit`).
+  (:func:`mesh_time_limit`, :class:`~ufl_frames.mesh.domain.MeshTimeLimit`);
+- only regular files (or links to one) are opened, and only up to a size a geometry can
+  have (:func:`max_file_bytes`): a FIFO, a device (``/dev/zero``, ``/dev/urandom``) or a
+  folder is refused before anything reads it (:func:`check_input_file`), also where a
+  ``.geo`` includes or merges it.
 
-The geometry must lie in a plane z = const; volumes and tetrahedra are rejected.
+The geometry must lie in one plane: a model in a plane other than z = const is rotated into
+z = 0 and meshed there (:func:`_into_own_plane`, the frame in the notes), a ``.msh`` in one
+is read in its own coordinates; volumes and tetrahedra are rejected.
 """
 
 import contextlib
+import hashlib
 import os
 import re
+import stat
 import sys
 from pathlib import Path
 
@@ -37,9 +45,10 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc()
 
 import gmsh  # noqa: E402
+import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames.mesh.arrays import surfaces  # noqa: E402
+from ufl_frames.mesh.arrays import plane_frame, surfaces  # noqa: E402
 from ufl_frames.mesh.distribute import create, verbose  # noqa: E402
 from ufl_frames.mesh.domain import (  # noqa: E402
     Domain,
@@ -59,6 +68,14 @@ CAD_EXTENSIONS = (".step", ".stp", ".brep")
 #: Seconds :func:`load` lets Gmsh read and mesh a file with the default ``max_triangles``
 #: (more in proportion for a larger one, :func:`mesh_time_limit`); then it is stopped.
 MESH_TIME_LIMIT = 300.0
+
+#: Largest ``.geo`` script read (and any file it includes), in bytes.
+MAX_SCRIPT_BYTES = 64 * 2**20
+#: Largest ``.step``/``.stp``/``.brep`` file read, in bytes.
+MAX_CAD_BYTES = 1024 * 2**20
+#: Bytes per triangle a ``.msh`` may hold: :func:`max_file_bytes` allows a mesh of
+#: ``max_triangles`` triangles this large (ASCII MSH 4.1 with its nodes takes about 100).
+MSH_BYTES_PER_TRIANGLE = 400
 
 _GMSH_3D_NAMES = {4: "tetrahedra", 5: "hexahedra", 6: "prisms", 7: "pyramids"}
 
@@ -128,8 +145,7 @@ def load(
     source = str(path)
 
     def make(notes):  # on rank 0 only: the file need not be visible to the other ranks
-        if not path.is_file():
-            raise GeometryError(f"geometry file not found: {source!r}")
+        check_input_file(path, limit)
         if ext in MESH_EXTENSIONS:
             _check_msh_header(path)
         if ext in GEO_EXTENSIONS:
@@ -148,16 +164,149 @@ def load(
             )
         if not surfaces():
             raise GeometryError(f"{source!r} defines no 2D surface")
+        _into_own_plane(source, notes)
         check_crossings(source)
         return mesh_model(Sizing(h, factor, limit, refinements), notes)
 
     return create(comm, make, source, cad=ext not in MESH_EXTENSIONS, time_limit=seconds)
 
 
+def max_file_bytes(path, max_triangles: float = MAX_TRIANGLES) -> int:
+    """The largest geometry file :func:`check_input_file` lets through, by its kind: a
+    ``.msh`` :data:`MSH_BYTES_PER_TRIANGLE` bytes per triangle allowed (at least
+    :data:`MAX_SCRIPT_BYTES`), a CAD file :data:`MAX_CAD_BYTES`, anything else (a
+    script) :data:`MAX_SCRIPT_BYTES`."""
+    ext = Path(path).suffix.lower()
+    if ext in MESH_EXTENSIONS:
+        return int(max(MAX_SCRIPT_BYTES, MSH_BYTES_PER_TRIANGLE * float(max_triangles)))
+    return MAX_CAD_BYTES if ext in CAD_EXTENSIONS else MAX_SCRIPT_BYTES
+
+
+def _kind_of(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def check_input_file(path, max_triangles: float = MAX_TRIANGLES, what: str = "geometry file"):
+    """Raise :class:`GeometryError` unless ``path`` is a regular file (or a link to one)
+    no larger than :func:`max_file_bytes`; nothing is opened (a FIFO would block, a
+    device be read without end).
+
+    Args:
+        path: the file.
+        max_triangles: as for :func:`load` (bounds a ``.msh``).
+        what: what the file is, for the message.
+
+    Returns:
+        The file's size in bytes.
+    """
+    path = Path(path)
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        raise GeometryError(f"{what} not found: {str(path)!r}") from None
+    except OSError as e:
+        raise GeometryError(f"cannot read {str(path)!r}: {one_line(e)}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise GeometryError(f"{what} {str(path)!r} is {_kind_of(info.st_mode)}: give a "
+                            "regular file")
+    bound = max_file_bytes(path, max_triangles)
+    if info.st_size > bound:
+        raise GeometryError(
+            f"{what} {str(path)!r} has {info.st_size} bytes, more than a geometry of at most "
+            f"{max_triangles:.3g} triangles can need ({bound} bytes): not read")
+    return info.st_size
+
+
+def _read_regular(path: Path, limit: int) -> bytes:
+    """At most ``limit`` bytes of ``path``, opened only if it is a regular file (checked on
+    the open descriptor, without blocking on a FIFO)."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    with os.fdopen(fd, "rb") as f:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise GeometryError(f"{str(path)!r} is {_kind_of(mode)}: give a regular file")
+        return f.read(limit)
+
+
+def file_digest(path, max_triangles: float = MAX_TRIANGLES) -> str | None:
+    """``"sha256:<hex>"`` of a geometry file, or None where :func:`check_input_file`
+    refuses it or it cannot be read (loading it reports why)."""
+    try:
+        size = check_input_file(path, max_triangles)
+        digest = hashlib.sha256()
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                return None
+            while size >= 0 and (chunk := f.read(min(2**20, size + 1))):
+                digest.update(chunk)
+                size -= len(chunk)
+        return "sha256:" + digest.hexdigest()
+    except (GeometryError, OSError):
+        return None
+
+
+def _into_own_plane(source: str, notes: list[str]) -> None:
+    """Rotate a model that lies in a plane other than z = const into z = 0 (its points
+    and points along its curves, :func:`~ufl_frames.mesh.arrays.plane_frame`): its mesh
+    coordinates are then (u, v) along the plane's axes e1, e2 from its origin o, said in
+    ``notes``. Raises :class:`GeometryError` where the model lies in no plane."""
+    samples = [np.asarray(gmsh.model.getValue(0, tag, []), dtype=float)
+               for _, tag in gmsh.model.getEntities(0)]
+    for _, curve in gmsh.model.getEntities(1):
+        lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, curve))
+        samples.append(np.asarray(gmsh.model.getValue(1, curve, np.linspace(lo, hi, 9)),
+                                  dtype=float))
+    xyz = np.concatenate([p.reshape(-1, 3) for p in samples]) if samples else np.zeros((0, 3))
+    frame = plane_frame(xyz, source)
+    if frame is None:
+        return
+    origin, e1, e2 = frame
+    normal = np.cross(e1, e2)
+    occ = gmsh.model.occ.getEntities(2)
+    if occ:  # the surfaces (their curves and points follow) and what bounds none of them
+        bounded = {(1, abs(t)) for _, t in gmsh.model.getBoundary(occ, combined=False,
+                                                                   oriented=False)}
+        free = [e for e in gmsh.model.occ.getEntities(1) if e not in bounded]
+        bounded |= {(0, abs(t)) for _, t in gmsh.model.getBoundary(
+            occ + free, combined=False, oriented=False, recursive=True)}
+        free += [e for e in gmsh.model.occ.getEntities(0) if e not in bounded]
+        rows = np.stack([e1, e2, normal])  # p -> R (p - o)
+        matrix = np.concatenate([rows, -(rows @ origin)[:, None]], axis=1)
+        gmsh.model.occ.affineTransform(occ + free, matrix.ravel().tolist())
+        gmsh.model.occ.synchronize()
+    if gmsh.model.getEntities(0) and not occ:
+        points = gmsh.model.getEntities(0)  # the built-in kernel's curves follow its points
+        geo = gmsh.model.geo
+        geo.translate(points, *(-origin))
+        # normal -> z about the horizontal axis e1, then e1 -> x about z
+        angle = float(np.arccos(np.clip(normal[2], -1.0, 1.0)))
+        if angle > 0:
+            geo.rotate(points, 0, 0, 0, *e1, -angle)
+        geo.rotate(points, 0, 0, 0, 0, 0, 1, -float(np.arctan2(e1[1], e1[0])))
+        geo.synchronize()
+    check = [np.asarray(gmsh.model.getValue(0, tag, []))[2] for _, tag in gmsh.model.getEntities(0)]
+    scale = max(float(np.abs(xyz).max()), 1e-300)
+    if check and float(np.ptp(check)) > 1e-8 * scale:
+        raise GeometryError(f"{source!r} lies in a tilted plane that could not be rotated into "
+                            "z = 0 (mixed CAD kernels?)")
+    notes.append("the geometry lies in a tilted plane: meshed in its own coordinates "
+                 f"(u, v) = ((p - o)·e1, (p - o)·e2), o = {_vector(origin)}, "
+                 f"e1 = {_vector(e1)}, e2 = {_vector(e2)}")
+
+
+def _vector(v) -> str:
+    return "(" + ", ".join(f"{float(c):.6g}" for c in v) + ")"
+
+
 def _check_msh_header(path: Path) -> None:
     try:
-        with open(path, "rb") as f:
-            head = f.read(64).lstrip()
+        head = _read_regular(path, 64).lstrip()
     except OSError as e:
         raise GeometryError(f"cannot read {str(path)!r}: {one_line(e)}") from None
     if not head.startswith((b"$MeshFormat", b"$NOD", b"$NOE")):
@@ -205,8 +354,9 @@ def _check_geo_script(path: Path, seen: set | None = None) -> None:
     if key in seen or len(seen) > 100:
         return
     seen.add(key)
+    check_input_file(path, what="script")
     try:
-        text = path.read_bytes().decode("utf-8", errors="replace")
+        text = _read_regular(path, MAX_SCRIPT_BYTES).decode("utf-8", errors="replace")
     except OSError as e:
         raise GeometryError(f"cannot read {str(path)!r}: {one_line(e)}") from None
 
@@ -228,8 +378,12 @@ def _check_geo_script(path: Path, seen: set | None = None) -> None:
     no_comments = re.sub(r'//[^\n]*|/\*.*?(?:\*/|\Z)', " ", text, flags=re.DOTALL)
     for command, name in _GEO_INCLUDE.findall(no_comments):
         child = path.parent / name
-        if (command == "Include" or child.suffix.lower() in GEO_EXTENSIONS) and child.is_file():
+        if not (child.exists() or child.is_symlink()):
+            continue  # Gmsh reports it
+        if command == "Include" or child.suffix.lower() in GEO_EXTENSIONS:
             _check_geo_script(child, seen)
+        else:
+            check_input_file(child, what=f"{command} file")
 
 
 def _merge(path: Path, quiet: bool) -> None:

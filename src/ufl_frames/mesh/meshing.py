@@ -80,8 +80,10 @@ def _unite_surfaces(notes: list[str]) -> None:
         )
         _restore_groups(groups, dict(zip(surfaces[:1] + tools, pieces, strict=True)), notes)
     else:
+        before = _entity_keys()
         gmsh.model.geo.removeAllDuplicates()
         gmsh.model.geo.synchronize()
+        _renumber_field_entities(before)
         notes.append(f"{len(surfaces)} surfaces meshed as one domain (shared curves are interior)")
 
 
@@ -137,6 +139,69 @@ def _restore_groups(groups: list, pieces: dict, notes: list[str]) -> None:
                          "geometry conforming with BooleanFragments before the groups)")
         if kept:
             gmsh.model.addPhysicalGroup(dim, sorted(set(kept)), tag, name)
+
+
+#: Options of Gmsh's size fields that name model entities (of the dimension given).
+_FIELD_ENTITY_LISTS = {"PointsList": 0, "CurvesList": 1, "SurfacesList": 2,
+                       "ExcludedSurfacesList": 2, "FanPointsList": 0}
+
+
+def _entity_keys() -> dict[tuple[int, int], np.ndarray]:
+    """Where each point, curve and surface of the model is: a point's coordinates; a
+    curve's two ends (in a fixed order) and its middle; a surface's bounding box."""
+    keys = {}
+    for dim, tag in gmsh.model.getEntities(0):
+        keys[dim, tag] = np.asarray(gmsh.model.getValue(0, tag, []), dtype=float)
+    for dim, tag in gmsh.model.getEntities(1):
+        lo, hi = (float(v[0]) for v in gmsh.model.getParametrizationBounds(1, tag))
+        ends = np.asarray(gmsh.model.getValue(1, tag, [lo, hi]), dtype=float).reshape(2, 3)
+        middle = np.asarray(gmsh.model.getValue(1, tag, [0.5 * (lo + hi)]), dtype=float)
+        ends = ends[np.lexsort(ends.T[::-1])]
+        keys[dim, tag] = np.concatenate([ends.ravel(), middle])
+    for dim, tag in gmsh.model.getEntities(2):
+        keys[dim, tag] = np.asarray(gmsh.model.getBoundingBox(dim, tag), dtype=float)
+    return keys
+
+
+def _renumber_field_entities(before: dict) -> None:
+    """Point the size fields at the entities that replaced the duplicates they named.
+
+    ``removeAllDuplicates`` deletes a curve or point that repeats another (two surfaces
+    drawn with their own copies of a shared side); a field that still names it (a
+    ``Distance`` to that curve, a ``Restrict`` to it) made Gmsh throw inside its meshing
+    threads, which ends the process with SIGABRT. Each name is replaced by the surviving
+    entity at the same place (:func:`_entity_keys`).
+
+    Args:
+        before: :func:`_entity_keys` of the model before the duplicates were removed.
+    """
+    fields = [int(f) for f in gmsh.model.mesh.field.list()]
+    if not fields:
+        return
+    after = _entity_keys()
+    scale = max((float(np.abs(k).max()) for k in before.values() if k.size), default=1.0)
+    tol = 1e-8 * max(scale, 1e-300)
+
+    def survivor(dim, tag):
+        if (dim, tag) in after and np.allclose(after[dim, tag], before[dim, tag], atol=tol):
+            return tag
+        for (d, t), key in after.items():
+            if d == dim and key.shape == before[dim, tag].shape and np.allclose(
+                    key, before[dim, tag], atol=tol):
+                return t
+        return None
+
+    for field in fields:
+        for option, dim in _FIELD_ENTITY_LISTS.items():
+            try:
+                tags = [int(t) for t in gmsh.model.mesh.field.getNumbers(field, option)]
+            except Exception:  # the field has no such option
+                continue
+            known = [t for t in tags if (dim, t) in before]
+            renamed = [survivor(dim, t) for t in known]
+            renamed = list(dict.fromkeys(t for t in renamed if t is not None))
+            if renamed != tags:
+                gmsh.model.mesh.field.setNumbers(field, option, renamed)
 
 
 def _override_meshing_requests(notes: list[str]) -> None:

@@ -48,6 +48,10 @@ AXES_AREA_IN2 = 40.0
 #: Longest side (inches) of the data area when the domain is wide / tall (screens are
 #: wider than tall).
 AXES_LONG_MAX_IN = (15.0, 11.0)
+#: Shortest side (inches) of the data area: a thinner domain (more than about 25:1) is
+#: drawn stretched across, without equal aspect (at equal aspect a 1000:1 strip would be
+#: a sliver no renderer can lay out).
+AXES_SHORT_MIN_IN = 0.6
 #: Smallest figure (inches): room for a wrapped title, the axis labels and the colour bar.
 FIGURE_MIN_IN = (3.0, 2.5)
 #: Font size of the title of :func:`plot_frames` (points).
@@ -109,6 +113,8 @@ class FrameLayout(NamedTuple):
     horizontal: bool
     #: the title, wrapped to the figure's width ("" for none)
     title: str
+    #: drawn at equal aspect (False: a domain too thin for it, stretched across)
+    equal: bool = True
 
 
 def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> FrameLayout:
@@ -117,9 +123,11 @@ def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> Fram
     The data area has the domain's aspect ratio and :data:`AXES_AREA_IN2` square
     inches, its longer side (horizontal or vertical, as the domain comes) capped by
     :data:`AXES_LONG_MAX_IN`: an elongated domain gets a long figure, not a sliver in
-    a fixed-width one. The figure adds room for labels, the colour bar (below wide
-    domains, right of the others), the legend and the title, wrapped to its width,
-    and is at least :data:`FIGURE_MIN_IN`. Depends only on the shape: scaling the
+    a fixed-width one; its shorter side is at least :data:`AXES_SHORT_MIN_IN` (a domain
+    thinner than that at equal aspect is stretched across: ``equal`` False). The
+    figure adds room for labels, the colour bar (below wide domains, right of the
+    others), the legend and the title, wrapped to its width, and is at least
+    :data:`FIGURE_MIN_IN`. Depends only on the shape: scaling the
     domain (mm instead of m) changes nothing but ``scale``.
 
     Args:
@@ -142,6 +150,8 @@ def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> Fram
     long_side = min(math.sqrt(AXES_AREA_IN2 * max(aspect, 1 / aspect)),
                     AXES_LONG_MAX_IN[0 if wide else 1])
     axes_w, axes_h = (long_side, long_side / aspect) if wide else (long_side * aspect, long_side)
+    equal = min(axes_w, axes_h) >= AXES_SHORT_MIN_IN
+    axes_w, axes_h = max(axes_w, AXES_SHORT_MIN_IN), max(axes_h, AXES_SHORT_MIN_IN)
     horizontal = aspect >= 1.4
     # Room around the data area (inches): tick labels and axis labels, colour bar.
     fig_w = axes_w + 0.85 + 0.25 + (0.0 if horizontal else 1.25)
@@ -155,9 +165,10 @@ def frame_layout(lo, hi, title: str | None = None, legend: bool = False) -> Fram
         figsize=(round(fig_w, 2), round(fig_h, 2)),
         axes_size=(axes_w, axes_h),
         limits=((lo[0] - margin, hi[0] + margin), (lo[1] - margin, hi[1] + margin)),
-        scale=axes_w / width,
+        scale=axes_w / width if wide else axes_h / height,
         horizontal=horizontal,
         title=text,
+        equal=equal,
     )
 
 
@@ -333,7 +344,8 @@ def _frames_figure(layout, points, rows, spacing, boundary, area, singularities,
         fig.set_size_inches(*new)
         if title is not None:
             title.set_text(_wrap_title(layout.title, new[0]))
-    ax.set_aspect("equal")
+    if layout.equal:
+        ax.set_aspect("equal")
     return fig
 
 

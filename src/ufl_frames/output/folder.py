@@ -11,6 +11,8 @@ import os
 import re
 import secrets
 import shutil
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -73,7 +75,10 @@ class OutputFolder:
 
     :meth:`open` creates a fresh hidden folder next to ``path`` (same parent, so that a
     rename moves it), where the run writes (:attr:`staging`); :meth:`commit` puts it in
-    place, :meth:`discard` removes it (and the parent folders :meth:`open` created).
+    place, :meth:`discard` removes it (and the parent folders :meth:`open` created). A
+    run killed meanwhile (SIGKILL, a rank of its MPI job killed) leaves no staging folder
+    either: a small guard process (:func:`_start_guard`) removes it when rank 0 dies
+    before :meth:`commit` or :meth:`discard`.
 
     * ``path`` does not exist: the staging folder is renamed to it in one step. If
       another run created it meanwhile, nothing is replaced: :class:`OutputFolderBusy`.
@@ -105,6 +110,7 @@ class OutputFolder:
         self.ours = tuple(ours)
         self.staging: Path | None = None
         self._created: list[Path] = []  # parent folders made by open(), innermost last
+        self._guard = None  # the guard process of the staging folder (rank 0)
 
     def _target(self) -> Path:
         return output_target(self.path)
@@ -119,9 +125,11 @@ class OutputFolder:
             self._created += create_missing(target.parent)
             token = f"{os.getpid():x}{secrets.token_hex(4)}"
             staging = target.parent / f".{target.name}.ufl-frames-{token}.partial"
+            self._guard = _start_guard(staging)  # first: no moment the folder is unguarded
             try:
                 staging.mkdir()
             except OSError as e:
+                self._stop_guard()
                 raise WriteError(e.errno, f"cannot create a folder in {str(target.parent)!r} "
                                  f"({e.strerror})") from e
             result = str(staging)
@@ -148,12 +156,29 @@ class OutputFolder:
                 self._created.pop().rmdir()  # only if still empty
             except OSError:
                 break
+        self._stop_guard()
 
     def commit(self) -> None:
         """Put the staging folder's files in place (see the class); collective."""
-        on_root(self.comm, self._publish)
+        try:
+            on_root(self.comm, self._publish)
+        except BaseException:
+            if self.staging is None or not os.path.lexists(self.staging):
+                self._stop_guard()
+            raise
         self.staging = None
         self._created = []
+        self._stop_guard()
+
+    def _stop_guard(self) -> None:
+        """Tell the guard process its work is done (the staging folder is gone)."""
+        guard, self._guard = self._guard, None
+        if guard is not None:
+            with contextlib.suppress(OSError, ValueError):
+                guard.stdin.write(b"done")
+                guard.stdin.close()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                guard.wait(timeout=2.0)
 
     def _publish(self) -> None:
         staging, target = self.staging, self._target()
@@ -207,6 +232,30 @@ class OutputFolder:
                 staging.rmdir()
             finally:
                 shutil.rmtree(old, ignore_errors=True)
+
+
+#: The guard process (:func:`_start_guard`): waits for its stdin to end; removes the
+#: staging folder unless it was told "done" first (the run died).
+_GUARD = """
+import os, shutil, sys
+said = sys.stdin.buffer.read()
+path = sys.argv[1]
+if said != b"done" and path.endswith(".partial") and os.path.isdir(path):
+    shutil.rmtree(path, ignore_errors=True)
+"""
+
+
+def _start_guard(staging: Path):
+    """A process of its own session (a job's kill does not reach it) that removes
+    ``staging`` when this process dies without saying it is done; None where it cannot
+    start (the run goes on unguarded)."""
+    try:
+        return subprocess.Popen([sys.executable, "-S", "-c", _GUARD, str(staging)],
+                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True,
+                                env={"PATH": os.environ.get("PATH", "")})
+    except OSError:
+        return None
 
 
 @contextlib.contextmanager

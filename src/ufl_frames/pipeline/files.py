@@ -1,7 +1,9 @@
 """The files of a frame field and of its stages, written into an existing folder.
 
 Each function is collective over the field's communicator and returns the names it
-wrote; figures and the stages' files are written by rank 0.
+wrote; figures and the stages' files are written by rank 0. A figure that cannot be
+drawn (a renderer's failure, not a full disk) is left out and its name and the reason
+added to ``skipped``: a picture never costs the results (:func:`figure`).
 """
 
 from pathlib import Path
@@ -11,11 +13,54 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc()
 
 from ufl_frames import output  # noqa: E402
+from ufl_frames.output.report import on_root  # noqa: E402
 
-__all__ = ["write_field", "write_param", "write_quads"]
+__all__ = ["figure", "write_field", "write_param", "write_quads"]
 
 
-def write_field(out, frames, label: str, tao_type: str | None = None) -> list[str]:
+def figure(comm, path, draw, skipped: list | None) -> list[str]:
+    """``draw()`` (collective over ``comm``; rank 0 writes ``path``): ``[path.name]``, or
+    ``[]`` where it failed.
+
+    A failure to write (an ``OSError``: a full disk, a path that cannot be written) is
+    raised on every rank; any other failure (matplotlib or FreeType on a figure it cannot
+    lay out) skips the figure: the part written is removed and ``(name, reason)``
+    appended to ``skipped`` on every rank (with ``skipped`` None it is raised too).
+
+    Args:
+        comm: the communicator ``draw`` is collective over.
+        path: the figure's file.
+        draw: writes it (raises on every rank alike, as
+            :func:`ufl_frames.output.report.on_root` does).
+        skipped: where skipped figures are recorded.
+
+    Returns:
+        The names written.
+    """
+    path = Path(path)
+    failure = None
+    try:
+        draw()
+    except Exception as e:  # noqa: BLE001  (decided below, alike on every rank)
+        failure = e
+    reason = None
+    if comm.rank == 0 and failure is not None:
+        text = " ".join(str(failure).split())
+        reason = ("" if isinstance(failure, OSError) or skipped is None
+                  else f"{type(failure).__name__}: {text}" if text else type(failure).__name__)
+    reason = comm.bcast(reason, root=0) if comm.size > 1 else reason
+    if reason is None and failure is None:
+        return [path.name]
+    if not reason:  # a write error, or no list to skip into: the run's failure
+        raise failure if failure is not None else output.WriteError(f"cannot write {path}")
+    if comm.rank == 0:
+        path.unlink(missing_ok=True)
+    skipped.append((path.name, reason))
+    return []
+
+
+def write_field(out, frames, label: str, tao_type: str | None = None,
+                skipped: list | None = None) -> list[str]:
     """The field for ParaView (:func:`ufl_frames.output.write_field`), ``frames.png`` and,
     after a solve, ``convergence.png`` (every level's history after nested iteration).
 
@@ -24,6 +69,8 @@ def write_field(out, frames, label: str, tao_type: str | None = None) -> list[st
         frames: the :class:`~ufl_frames.pipeline.field.FrameField`.
         label: the geometry's name, for the titles.
         tao_type: the TAO method, for the convergence plot's title (None: not said).
+        skipped: where a figure that cannot be drawn is recorded (:func:`figure`;
+            None: its failure is raised).
 
     Returns:
         The names written.
@@ -33,9 +80,11 @@ def write_field(out, frames, label: str, tao_type: str | None = None) -> list[st
     kind = "isotropic" if frames.isotropic else "non-isotropic"
     names = [p.name for p in output.write_field(out, frames.q)]
     H = f" (H = {result.H_final:.3g})" if result is not None else ""
-    output.plot_frames(out / "frames.png", frames.q, title=f"Frame field: {label}, {kind}{H}",
-                   singularities=frames.singularities)
-    names.append("frames.png")
+    comm = frames.domain.comm
+    names += figure(comm, out / "frames.png",
+                    lambda: output.plot_frames(out / "frames.png", frames.q,
+                                               title=f"Frame field: {label}, {kind}{H}",
+                                               singularities=frames.singularities), skipped)
     if result is not None:
         method = f", TAO {tao_type}" if tao_type else ""
         levels, iterations = None, f"{result.iterations} iterations"
@@ -44,16 +93,15 @@ def write_field(out, frames, label: str, tao_type: str | None = None) -> list[st
                       in zip(frames.levels, frames.level_histories, strict=True)]
             iterations = (f"{' + '.join(str(e['iterations']) for e in frames.levels)} "
                           f"iterations on {len(frames.levels)} meshes")
-        output.plot_convergence(
+        names += figure(comm, out / "convergence.png", lambda: output.plot_convergence(
             out / "convergence.png", result.history,
-            title=f"{label}, {kind}: {iterations}{method}",
-            comm=frames.domain.comm, levels=levels,
-        )
-        names.append("convergence.png")
+            title=f"{label}, {kind}: {iterations}{method}", comm=comm, levels=levels,
+        ), skipped)
     return names
 
 
-def write_param(out, param, label: str, comm, stem: str = "param") -> list[str]:
+def write_param(out, param, label: str, comm, stem: str = "param",
+                skipped: list | None = None) -> list[str]:
     """``<stem>.png`` (the integer iso-lines of U and V) and ``<stem>.vtu`` of a
     :class:`~ufl_frames.pipeline.stages.Parametrised` ``param``, written by rank 0 of
     ``comm`` into the folder ``out`` (collective).
@@ -65,25 +113,30 @@ def write_param(out, param, label: str, comm, stem: str = "param") -> list[str]:
         label: the geometry's name, for the figure's title.
         comm: the field's communicator.
         stem: the files' name without suffix.
+        skipped: as for :func:`write_field`.
 
     Returns:
         The names written, on every rank.
     """
     from ufl_frames.param.figures import plot_param, write_param_vtu
 
-    names = [f"{stem}.png", f"{stem}.vtu"]
-    if comm.rank == 0:
+    out = Path(out)
+
+    def draw():
         quality = param.quality
         title = (f"{label}: iso-lines of U, V (misfit {quality['misfit']:.3g}, "
                  f"{quality['flipped_triangles']} flipped, {quality['cuts']} cuts)")
-        plot_param(Path(out) / names[0], param.parametrisation, title=title)
-        write_param_vtu(Path(out) / names[1], param.parametrisation)
+        plot_param(out / f"{stem}.png", param.parametrisation, title=title)
+
+    names = figure(comm, out / f"{stem}.png", lambda: on_root(comm, draw), skipped)
+    if comm.rank == 0:
+        write_param_vtu(out / f"{stem}.vtu", param.parametrisation)
     comm.Barrier()
-    return names
+    return [*names, f"{stem}.vtu"]
 
 
 def write_quads(out, quads, label: str, comm, stem: str = "quads",
-                groups=()) -> list[str]:
+                groups=(), skipped: list | None = None) -> list[str]:
     """``<stem>.msh`` (Gmsh MSH 4.1), ``<stem>.vtu`` (scaled Jacobian per quad) and
     ``<stem>.png`` of a :class:`~ufl_frames.pipeline.stages.QuadMeshed` ``quads``, written
     by rank 0 of ``comm`` into the folder ``out`` (collective).
@@ -98,6 +151,7 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads",
             (:attr:`ufl_frames.mesh.domain.Domain.physical_groups`), written to the
             ``.msh`` with the model's entities where the quad mesh has them
             (:func:`~ufl_frames.quads.msh.write_quad_msh`).
+        skipped: as for :func:`write_field`.
 
     Returns:
         The names written, on every rank.
@@ -105,17 +159,22 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads",
     from ufl_frames.quads.measures import scaled_jacobians
     from ufl_frames.quads.msh import plot_quads, write_quad_msh, write_quad_vtu
 
-    names = [f"{stem}.msh", f"{stem}.vtu", f"{stem}.png"]
+    names = [f"{stem}.msh", f"{stem}.vtu"]
+    out = Path(out)
     if comm.rank == 0:
-        mesh, quality = quads.mesh, quads.quality
-        out = Path(out)
+        mesh = quads.mesh
         model = {name: getattr(mesh, name, None) for name in (
             "quad_region", "curve_edges", "edge_curve", "point_nodes", "point_tag")}
         write_quad_msh(out / names[0], mesh.points, mesh.quads, groups=groups, **model)
         write_quad_vtu(out / names[1], mesh.points, mesh.quads,
                        {"scaled_jacobian": scaled_jacobians(mesh.points, mesh.quads)})
+    comm.Barrier()
+
+    def draw():
+        mesh, quality = quads.mesh, quads.quality
         title = (f"{label}: {quality['quads']} quads, {quality['irregular_vertices']} "
                  f"irregular vertices, min SJ {quality['min_sj']:.2f}")
-        plot_quads(out / names[2], mesh.points, mesh.quads, title=title)
-    comm.Barrier()
-    return names
+        plot_quads(out / f"{stem}.png", mesh.points, mesh.quads, title=title)
+
+    return names + figure(comm, out / f"{stem}.png", lambda: on_root(comm, draw),
+                          skipped)
