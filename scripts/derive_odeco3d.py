@@ -76,7 +76,8 @@ def main():
             if c != 0:
                 lines.append(f"    ({m}, {i}, {j}): F({c.p}, {c.q}),")
     lines += ["}", "", f"NUM_QUADRICS = {count}", ""]
-    out = Path(__file__).resolve().parents[1] / "src" / "ufl_frames" / "frames3d" / "_variety_table.py"
+    out = (Path(__file__).resolve().parents[1] / "src" / "ufl_frames" / "frames3d"
+           / "_variety_table.py")
     out.write_text("\n".join(lines))
     print(f"{count} quadrics written to {out}")
 

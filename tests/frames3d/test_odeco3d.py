@@ -62,7 +62,7 @@ def test_harmonics_have_their_degree():
         c = harmonics.FROM_Q[:, j]
         lap = {}
         for (a, b, e), coef in zip(harmonics.MONOMIALS, c, strict=True):
-            for k, (p, dec) in enumerate(((a, (2, 0, 0)), (b, (0, 2, 0)), (e, (0, 0, 2)))):
+            for p, dec in ((a, (2, 0, 0)), (b, (0, 2, 0)), (e, (0, 0, 2))):
                 if p >= 2:
                     key = (a - dec[0], b - dec[1], e - dec[2])
                     lap[key] = lap.get(key, 0.0) + coef * p * (p - 1)

@@ -94,7 +94,8 @@ def _harmonic_quartics() -> list[dict]:
         _mul(_mul(x, z), s73),
         _mul(_add(xx, _scale(-1, yy)), s7),
         _mul(_mul(_add(xx, _scale(-3, yy)), x), z),
-        _add(_mul(xx, _add(xx, _scale(-3, yy))), _scale(-1, _mul(yy, _add(_scale(3, xx), _scale(-1, yy))))),
+        _add(_mul(xx, _add(xx, _scale(-3, yy))),
+             _scale(-1, _mul(yy, _add(_scale(3, xx), _scale(-1, yy))))),
     ]
     return [_mul(r2, r2)] + [_mul(p, r2) for p in deg2] + deg4
 

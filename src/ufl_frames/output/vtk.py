@@ -139,6 +139,8 @@ def write_vtu(path, points, cells, cell_type: str, point_data: dict | None = Non
         return "".join(out)
 
     m, k = c.shape
+    offsets = text(k * np.arange(1, m + 1), "%d")
+    types = text(np.full(m, VTK_CELL_TYPES[(cell_type, k)]), "%d")
     body = f"""<?xml version="1.0"?>
 <VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
 <UnstructuredGrid><Piece NumberOfPoints="{x.shape[0]}" NumberOfCells="{m}">
@@ -148,8 +150,8 @@ def write_vtu(path, points, cells, cell_type: str, point_data: dict | None = Non
 </Points>
 <Cells>
 <DataArray type="Int64" Name="connectivity" format="ascii">{text(c, "%d")}</DataArray>
-<DataArray type="Int64" Name="offsets" format="ascii">{text(k * np.arange(1, m + 1), "%d")}</DataArray>
-<DataArray type="UInt8" Name="types" format="ascii">{text(np.full(m, VTK_CELL_TYPES[(cell_type, k)]), "%d")}</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">{offsets}</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">{types}</DataArray>
 </Cells>
 </Piece></UnstructuredGrid>
 </VTKFile>
