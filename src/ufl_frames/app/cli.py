@@ -66,8 +66,9 @@ import time
 import traceback
 
 from ufl_frames import __version__, interrupts
-from ufl_frames.app.failures import DEBUG_VARIABLE, UsageError, failure_status
+from ufl_frames.app.failures import DEBUG_VARIABLE, InputError, UsageError, failure_status
 from ufl_frames.app.run import DEFAULT_MAX_IT, DEFAULT_MESH_SIZE, PROG, RunConfig, run
+from ufl_frames.app.volume import run_volume
 from ufl_frames.bootstrap import init_petsc, options_scope, petsc_initialised
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
 from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
@@ -177,7 +178,11 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
     """The arguments of ``solve``: those of :class:`~ufl_frames.app.run.RunConfig`."""
     solve.add_argument("geometry", metavar="GEOMETRY",
-                       help="'annulus', 'piano' or a .geo/.msh/.step/.stp/.brep file")
+                       help="'annulus', 'piano' (2D), 'box', 'cylinder', 'ball' (3D) or a "
+                       ".geo/.msh/.step/.stp/.brep file (a file with volumes: 3D)")
+    solve.add_argument("--dim", type=int, choices=(2, 3), default=None,
+                       help="2D (surfaces) or 3D (volumes: the smooth boundary-aligned MBO "
+                       "frame field and its singular graph); default: from the geometry")
     solve.add_argument("--isotropic", action="store_true",
                        help="isotropic frames (l1 = l2, crosses); default: general frames")
     solve.add_argument("--mesh-size", type=_positive_float, default=DEFAULT_MESH_SIZE,
@@ -503,6 +508,32 @@ def _report_failure(exc: BaseException, comm, agreement) -> int:
     return status  # not reached
 
 
+def _is_volume(args, comm) -> bool:
+    """Whether ``solve`` runs the 3D path: ``--dim 3``, a 3D built-in's name, or a file
+    that defines volumes (rank 0 looks; collective). ``--dim 2`` keeps the 2D path."""
+    from ufl_frames.app.volume import BUILTINS, defines_volumes
+    from ufl_frames.mesh import KNOWN_GEOMETRIES
+
+    if args.dim == 2:
+        return False
+    if args.geometry in BUILTINS:
+        return True
+    if args.geometry in KNOWN_GEOMETRIES:
+        if args.dim == 3:
+            raise InputError(f"{args.geometry!r} is a 2D shape: the 3D built-ins are "
+                             f"{', '.join(sorted(BUILTINS))}")
+        return False
+    if args.dim == 3:
+        return True
+    found = None
+    if comm.rank == 0:
+        try:
+            found = defines_volumes(args.geometry)
+        except Exception:  # the 2D loader says what is wrong with the file
+            found = False
+    return bool(comm.bcast(found, root=0))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``ufl-frames`` command with ``argv`` (default ``sys.argv[1:]``); exit status."""
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
@@ -556,8 +587,11 @@ def main(argv: list[str] | None = None) -> int:
             with options_scope(options):  # this run's options, removed afterwards
                 interrupts.activate(watch)
                 try:
-                    run(_mesh_config(args) if args.command == "mesh"
-                        else RunConfig.from_args(args), comm=comm)
+                    if args.command == "solve" and _is_volume(args, comm):
+                        run_volume(RunConfig.from_args(args), comm=comm)
+                    else:
+                        run(_mesh_config(args) if args.command == "mesh"
+                            else RunConfig.from_args(args), comm=comm)
                     _warn_unused(options, comm, args.quiet)
                 except Exception as e:
                     watch.stage = "reporting the failure"

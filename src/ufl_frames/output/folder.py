@@ -34,6 +34,7 @@ OUTPUT_NAMES = (
     r"frames\.xdmf", r"frames\.h5", r"frames\.png", r"convergence\.png",
     r"param\.png", r"param\.vtu",  # FrameField.write_param
     r"quads\.msh", r"quads\.vtu", r"quads\.png",  # FrameField.write_quads
+    r"frames3d\.vtu", r"singular\.vtu", r"singular\.png",  # a 3D field (output.volume)
     r"checkpoint",  # ufl_frames.checkpoint: an unfinished run's, removed when it completes
 )
 _OUTPUT_NAME = re.compile("|".join(f"(?:{name})" for name in OUTPUT_NAMES))

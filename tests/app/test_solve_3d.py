@@ -1,0 +1,69 @@
+"""``ufl-frames solve`` on volumes: the 3D built-ins and a file with a volume take the 3D
+path (the MBO field and its singular graph); the files read back; 2D options and 2D
+shapes with ``--dim 3`` are refused with one line. In-process (serial and under
+``mpirun -n 2``)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ufl_frames.bootstrap import init_petsc
+
+init_petsc([])  # not pytest's command line
+
+from mpi4py import MPI  # noqa: E402
+
+from ufl_frames.app import cli  # noqa: E402
+from ufl_frames.output.vtk import read_vtk  # noqa: E402
+
+COMM = MPI.COMM_WORLD
+FILES = {"frames3d.vtu", "singular.vtu", "singular.png", "summary.json"}
+PLATE_GEO = 'SetFactory("OpenCASCADE");\nBox(1) = {0, 0, 0, 1, 0.6, 0.3};\n'
+
+
+def folder(tmp_path_factory, name):
+    return Path(COMM.bcast(str(tmp_path_factory.mktemp(name)), root=0))
+
+
+def test_box_file_is_solved_in_3d(tmp_path_factory):
+    root = folder(tmp_path_factory, "box3d")
+    geo = root / "plate.geo"
+    if COMM.rank == 0:
+        geo.write_text(PLATE_GEO)
+    COMM.Barrier()
+    out = root / "out"
+    assert cli.main(["solve", str(geo), "--mesh-size", "0.15", "--out", str(out), "-q"]) == 0
+    assert {p.name for p in out.iterdir()} == FILES
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["dimension"] == 3 and summary["ranks"] == COMM.size
+    assert summary["singular_graph"]["edges"] == 0  # a box's frames are its axes
+    frames = read_vtk(out / "frames3d.vtu")
+    assert frames["cells"].shape == (summary["tetrahedra"], 4)
+    u = np.stack([frames["point_data"][f"u{i}"] for i in (1, 2, 3)], axis=1)
+    assert np.abs(np.abs(u).max(axis=1) - 1).max() < 1e-9  # unit, along the axes
+
+
+def test_ball_builtin_has_a_valid_singular_graph(tmp_path_factory):
+    out = folder(tmp_path_factory, "ball3d") / "out"
+    assert cli.main(["solve", "ball", "--mesh-size", "0.25", "--out", str(out), "-q"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    graph = summary["singular_graph"]
+    assert graph["edges"] > 0 and graph["open_ends"] == 0
+    lines = read_vtk(out / "singular.vtu")
+    assert lines["cells"].shape == (graph["edges"], 2)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["solve", "ball", "--quads"], "not available for 3D"),
+    (["solve", "cylinder", "--isotropic"], "not available for 3D"),
+    (["solve", "annulus", "--dim", "3"], "is a 2D shape"),
+])
+def test_2d_options_are_refused(tmp_path_factory, capsys, argv, message):
+    out = folder(tmp_path_factory, "refused") / "out"
+    assert cli.main([*argv, "--out", str(out)]) == 1
+    if COMM.rank == 0:
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0]
+    assert not out.exists()
