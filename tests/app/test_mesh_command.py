@@ -191,3 +191,20 @@ def test_mesh_under_mpirun(tmp_path):
     assert {p.name for p in (tmp_path / "par").iterdir()} == FILES
     x, boundary = msh_nodes(tmp_path / "par" / "quads.msh")
     assert np.abs(np.linalg.norm(x[boundary], axis=1) - RADIUS).max() < 2e-9
+
+
+def test_mesh_follows_a_size_expression(tmp_path_factory):
+    """``mesh --size EXPR --quads N``: the sized non-isotropic field, quads graded by the
+    expression (their local size correlates with it) and about N of them."""
+    root = Path(COMM.bcast(str(tmp_path_factory.mktemp("sized")), root=0))
+    geo = root / "square.geo"
+    if COMM.rank == 0:
+        geo.write_text('SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n')
+    COMM.Barrier()
+    out = root / "out"
+    assert cli.main(["mesh", str(geo), "--size", "0.03 + 0.12*x", "--quads", "300",
+                     "--out", str(out), "-q"]) == 0
+    sizes = json.loads((out / "summary.json").read_text())["sizes"]
+    assert sizes["h_ratio"] == pytest.approx(5.0, rel=0.05)
+    assert sizes["quads"]["log_correlation"] >= 0.9
+    assert abs(sizes["quads"]["quads"] - 300) <= 0.1 * 300

@@ -287,6 +287,12 @@ def _add_mesh_command(commands) -> None:
                       "sizes, and quads of their mean edge length)")
     size.add_argument("--quads", dest="quad_count", type=_positive_int, default=None,
                       metavar="N", help="about N quads: quad size sqrt(area / N)")
+    mesh.add_argument("--size", type=_size, default=None, metavar="EXPR",
+                      help="quads graded by a size h(x, y): a NumPy expression in x and y "
+                      "(e.g. \"0.02 + 0.1*hypot(x, y)\") or 'file' (the file's point sizes, "
+                      "MeshSize and size fields, as Gmsh evaluates them); the field is then "
+                      "the sized non-isotropic one. Default: uniform quads of the "
+                      "integrable isotropic field")
     mesh.add_argument("--out", metavar="DIR", default=None,
                       help="output folder (default out_<geometry stem>); must not exist "
                       "or be empty unless --force")
@@ -301,7 +307,8 @@ def _add_mesh_command(commands) -> None:
 def _mesh_config(args) -> RunConfig:
     """The :class:`RunConfig` of parsed ``mesh`` arguments."""
     return RunConfig.for_mesh(args.geometry, quad_size=args.quad_size,
-                              quad_count=args.quad_count, out=args.out, force=args.force,
+                              quad_count=args.quad_count, size=args.size, out=args.out,
+                              force=args.force,
                               mesh_time_limit=args.mesh_time_limit, quiet=args.quiet)
 
 

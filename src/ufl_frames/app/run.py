@@ -107,17 +107,22 @@ class RunConfig:
         """The config of ``ufl-frames mesh``: a mesher's defaults — the integrable
         isotropic field (the conformal scale, one mesh), its quads, their boundary nodes on
         the CAD curves, only the quads' files. A ``quad_size`` is also the triangles'
-        size; ``quad_count`` N gives quads of size sqrt(area / N) on the default triangles.
+        size; ``quad_count`` N gives about N quads. With a ``size`` (an expression in x, y,
+        or ``file``: the file's own sizes) the field is the sized non-isotropic one, whose
+        lengths follow it (:mod:`ufl_frames.mesh.sizes`), instead of the conformal scale.
 
         Args:
             geometry: a built-in shape's name or a geometry file.
             quad_size: the quads' mean edge length (None: the triangles').
             quad_count: the number of quads asked for instead (None: by size).
-            options: other fields (``out``, ``force``, ``quiet``, ``mesh_time_limit``).
+            options: other fields (``out``, ``force``, ``quiet``, ``mesh_time_limit``,
+                ``size``, ``size_weight``).
         """
-        return cls(geometry=geometry, conformal=True, levels=1, quads=True,
-                   quad_size=quad_size, quad_count=quad_count, mesh_size=quad_size,
-                   field_files=False, on_cad=True, **options)
+        size = options.pop("size", None)
+        sized = size not in (None, "none")
+        return cls(geometry=geometry, conformal=not sized, size=size if sized else None,
+                   levels=1, quads=True, quad_size=quad_size, quad_count=quad_count,
+                   mesh_size=quad_size, field_files=False, on_cad=True, **options)
 
     @property
     def label(self) -> str:
