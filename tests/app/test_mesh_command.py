@@ -84,7 +84,9 @@ def test_boundary_nodes_on_the_circle(disk_run):
     assert cad["refused"] == 0 and cad["moved"] > 0 and cad["note"] is None
     if COMM.rank == 0:
         x, boundary = msh_nodes(out / "quads.msh")
-        assert boundary.size == cad["moved"]
+        # every boundary node moved onto the circle, except the circle's model point: a
+        # quad vertex that the triangle mesh already had exactly on the point
+        assert boundary.size - cad["moved"] in (0, 1)
         r = np.linalg.norm(x[boundary], axis=1)
         assert np.abs(r - RADIUS).max() < 1e-9 * diameter
 
