@@ -8,6 +8,7 @@ the local spacing at most), so that only the features' edges are straight lines.
 """
 
 import numpy as np
+from planar_meshes import tensor_grid
 
 from ufl_frames.param.features import Features
 
@@ -19,20 +20,6 @@ def pieces(*stops, h=0.05):
         k = max(1, int(round((b - a) / h)))
         out += list(np.linspace(a, b, k + 1)[1:])
     return np.array(out)
-
-
-def tensor_mesh(xs, ys):
-    """Triangles (alternating diagonals) of the tensor grid of ``xs`` × ``ys``: points
-    (n, 2) and cells (m, 3)."""
-    nx, ny = len(xs) - 1, len(ys) - 1
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    x = np.stack([X.ravel(), Y.ravel()], axis=1)
-    idx = np.arange(x.shape[0]).reshape(nx + 1, ny + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    flip = ((np.arange(nx)[:, None] + np.arange(ny)[None, :]) % 2).astype(bool)
-    t1 = np.where(flip[..., None], np.stack([a, b, d], -1), np.stack([a, b, c], -1))
-    t2 = np.where(flip[..., None], np.stack([b, c, d], -1), np.stack([a, c, d], -1))
-    return x, np.concatenate([t1.reshape(-1, 3), t2.reshape(-1, 3)])
 
 
 def perturb(x, keep, amount, seed=0):
@@ -103,7 +90,7 @@ def interface_box(interface=0.43, width=1.0, height=0.7, h=0.05, seed=0):
     interface's ends. Returns (x, cells, features)."""
     xs = pieces(0.0, interface, width, h=h)
     ys = pieces(0.0, height, h=h)
-    x, cells = tensor_mesh(xs, ys)
+    x, cells = tensor_grid(xs, ys)
     on = _near(x[:, 0], interface)
     boundary = _near(x[:, 0], 0) | _near(x[:, 0], width) | _near(x[:, 1], 0) \
         | _near(x[:, 1], height)
@@ -120,7 +107,7 @@ def three_region_box(xi=0.43, yi=0.33, width=1.0, height=0.7, h=0.05, seed=1):
     meeting at the T-junction (xi, yi) (a model point). Returns (x, cells, features)."""
     xs = pieces(0.0, xi, width, h=h)
     ys = pieces(0.0, yi, height, h=h)
-    x, cells = tensor_mesh(xs, ys)
+    x, cells = tensor_grid(xs, ys)
     X, Y = x[:, 0], x[:, 1]
     vertical = _near(X, xi)
     horizontal = _near(Y, yi) & (X >= xi - 1e-12)
@@ -144,7 +131,7 @@ def embedded_box(segment=((0.25, 0.37), (0.64, 0.37)), point=(0.81, 0.18), width
     px, py = point
     xs = pieces(*sorted({0.0, ax, bx, px, width}), h=h)
     ys = pieces(*sorted({0.0, ay, py, height}), h=h)
-    x, cells = tensor_mesh(xs, ys)
+    x, cells = tensor_grid(xs, ys)
     X, Y = x[:, 0], x[:, 1]
     on = _near(Y, ay) & (X >= ax - 1e-12) & (X <= bx + 1e-12)
     at = _near(X, px) & _near(Y, py)
@@ -189,7 +176,7 @@ def embedded_corner_box(corner=(0.64, 0.37), start=0.25, top=0.58, width=1.0, he
     cx, cy = corner
     xs = pieces(*sorted({0.0, start, cx, width}), h=h)
     ys = pieces(*sorted({0.0, cy, top, height}), h=h)
-    x, cells = tensor_mesh(xs, ys)
+    x, cells = tensor_grid(xs, ys)
     X, Y = x[:, 0], x[:, 1]
     across = _near(Y, cy) & (X >= start - 1e-12) & (X <= cx + 1e-12)
     up = _near(X, cx) & (Y >= cy - 1e-12) & (Y <= top + 1e-12)

@@ -8,7 +8,13 @@ from ufl_frames.frames2d import odeco
 
 def grid(nx, ny, x0=0.0, x1=1.0, y0=0.0, y1=1.0):
     """Structured right triangles on a rectangle (alternating diagonals)."""
-    xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+    return tensor_grid(np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1))
+
+
+def tensor_grid(xs, ys):
+    """Triangles (alternating diagonals) of the tensor grid of ``xs`` × ``ys``: points
+    (n, 2) and cells (m, 3)."""
+    nx, ny = len(xs) - 1, len(ys) - 1
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     x = np.stack([X.ravel(), Y.ravel()], axis=1)
     idx = np.arange(x.shape[0]).reshape(nx + 1, ny + 1)

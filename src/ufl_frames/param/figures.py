@@ -3,7 +3,6 @@
 Written on the rank that holds the :class:`~ufl_frames.param.seamless.Parametrisation`.
 """
 
-from pathlib import Path
 
 import numpy as np
 
@@ -74,29 +73,7 @@ def write_param_vtu(path, p: Parametrisation) -> None:
     target = np.sqrt(np.sum(p.target_u**2 + p.target_v**2, axis=1))
     misfit = residual / np.maximum(target, 1e-300)
 
-    def values(a, fmt="%.12g"):
-        return " ".join(fmt % v for v in np.asarray(a).ravel())
+    from ufl_frames.output.vtk import write_vtu
 
-    points = np.c_[xy, np.zeros(len(xy))]
-    m = triangles.shape[0]
-    offsets, types = values(3 * np.arange(1, m + 1), "%d"), values(np.full(m, 5), "%d")
-    text = f"""<?xml version="1.0"?>
-<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
-<UnstructuredGrid><Piece NumberOfPoints="{len(xy)}" NumberOfCells="{m}">
-<PointData Scalars="U">
-<DataArray type="Float64" Name="U" format="ascii">{values(p.uv[:, 0])}</DataArray>
-<DataArray type="Float64" Name="V" format="ascii">{values(p.uv[:, 1])}</DataArray>
-</PointData>
-<CellData><DataArray type="Float64" Name="misfit" format="ascii">{values(misfit)}</DataArray>
-</CellData>
-<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">
-{values(points)}</DataArray></Points>
-<Cells>
-<DataArray type="Int64" Name="connectivity" format="ascii">{values(triangles, "%d")}</DataArray>
-<DataArray type="Int64" Name="offsets" format="ascii">{offsets}</DataArray>
-<DataArray type="UInt8" Name="types" format="ascii">{types}</DataArray>
-</Cells>
-</Piece></UnstructuredGrid>
-</VTKFile>
-"""
-    Path(path).write_text(text)
+    write_vtu(path, xy, triangles, "triangle",
+              point_data={"U": p.uv[:, 0], "V": p.uv[:, 1]}, cell_data={"misfit": misfit})
