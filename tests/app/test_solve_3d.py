@@ -67,3 +67,32 @@ def test_2d_options_are_refused(tmp_path_factory, capsys, argv, message):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0]
     assert not out.exists()
+
+
+def test_step_files_are_told_apart_by_their_solids(tmp_path_factory):
+    """A STEP file with a solid takes the 3D path, one with a planar face alone the 2D
+    one (the file is scanned for solid entities, not loaded)."""
+    import gmsh
+
+    from ufl_frames.app.volume import defines_volumes
+
+    if COMM.rank:
+        return
+    root = Path(tmp_path_factory.mktemp("step"))
+    owns = not gmsh.isInitialized()
+    if owns:
+        gmsh.initialize(argv=[], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        for name, make in (("solid", lambda: gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)),
+                           ("face", lambda: gmsh.model.occ.addRectangle(0, 0, 0, 1, 1))):
+            gmsh.model.add(name)
+            make()
+            gmsh.model.occ.synchronize()
+            gmsh.write(str(root / f"{name}.step"))
+            gmsh.model.remove()
+    finally:
+        if owns:
+            gmsh.finalize()
+    assert defines_volumes(root / "solid.step")
+    assert not defines_volumes(root / "face.step")

@@ -535,7 +535,7 @@ def _is_volume(args, comm) -> bool:
     found = None
     if comm.rank == 0:
         try:
-            found = defines_volumes(args.geometry)
+            found = defines_volumes(args.geometry, getattr(args, "mesh_time_limit", None))
         except Exception:  # the 2D loader says what is wrong with the file
             found = False
     return bool(comm.bcast(found, root=0))

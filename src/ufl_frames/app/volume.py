@@ -27,14 +27,36 @@ _NOT_IN_3D = ("isotropic", "conformal", "param", "quads", "quad_size", "quad_cou
               "resume", "levels", "nested_meshes", "free_singularities")
 
 
-def defines_volumes(path) -> bool:
-    """Whether the geometry file ``path`` (checked as an input file first) defines volumes
-    (rank 0 work: opens it in Gmsh without meshing; a ``.msh``: holds tetrahedra)."""
+def defines_volumes(path, time_limit: float | None = None) -> bool:
+    """Whether the geometry file ``path`` defines volumes (rank 0 work; a ``.msh``: holds
+    tetrahedra; a STEP file: names a solid). The file is screened first as the 2D loader
+    screens it (a regular file of bounded size; a ``.geo`` script's commands that act
+    outside, refused before Gmsh runs it); a ``.geo`` or ``.brep`` is then opened in Gmsh,
+    without meshing, in a child process stopped after ``time_limit`` seconds (default
+    :func:`~ufl_frames.mesh.files.mesh_time_limit`). A refusal raises
+    :class:`~ufl_frames.mesh.domain.GeometryError`."""
+    import math
+    import os
+
+    from ufl_frames.mesh import files
+    from ufl_frames.mesh.distribute import _in_child
+
+    files.check_input_file(path)
+    suffix = Path(path).suffix.lower()
+    if suffix in (".step", ".stp"):  # a text file: its solids are named, no need to load it
+        return _step_has_solids(path)
+    if suffix in files.GEO_EXTENSIONS:
+        files._check_geo_script(Path(path))  # what the script may do, before Gmsh runs it
+    limit = files.mesh_time_limit() if time_limit is None else time_limit
+    if math.isfinite(limit) and hasattr(os, "fork"):
+        return _in_child(lambda: _open_and_look(path), str(path), limit)
+    return _open_and_look(path)
+
+
+def _open_and_look(path) -> bool:
+    """Gmsh's look at ``path``: volumes in the model, or tetrahedra in a ``.msh``."""
     import gmsh
 
-    from ufl_frames.mesh.files import check_input_file
-
-    check_input_file(path)
     owns = not gmsh.isInitialized()
     if owns:
         gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
@@ -45,13 +67,27 @@ def defines_volumes(path) -> bool:
         if Path(path).suffix.lower() == ".msh":
             return bool(gmsh.model.mesh.getElementsByType(4)[0].size)
         return bool(gmsh.model.getEntities(3))
-    except Exception:  # the 2D loader reports what is wrong with the file
-        return False
     finally:
         if owns:
             gmsh.finalize()
         else:
             gmsh.model.remove()
+
+
+#: STEP entities of solids (ISO 10303-42).
+_STEP_SOLIDS = (b"MANIFOLD_SOLID_BREP", b"BREP_WITH_VOIDS", b"FACETED_BREP")
+
+
+def _step_has_solids(path) -> bool:
+    """Whether the STEP file ``path`` names a solid (read in blocks, once)."""
+    tail = b""
+    with open(path, "rb") as f:
+        while block := f.read(1 << 20):
+            text = tail + block.upper()
+            if any(name in text for name in _STEP_SOLIDS):
+                return True
+            tail = text[-32:]
+    return False
 
 
 def run_volume(config, comm=None) -> dict:
