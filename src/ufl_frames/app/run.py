@@ -87,6 +87,9 @@ class RunConfig:
     field_files: bool = True
     #: Move the quads' boundary nodes onto the CAD curves (:mod:`ufl_frames.mesh.cad`).
     on_cad: bool = False
+    #: Where no valid quad mesh comes out at the default quad size, take a smaller one
+    #: that gives one (``ufl-frames mesh`` without a size or count asked).
+    adapt_quad_size: bool = False
     #: ``--size``: an expression, 'file', 'uniform', 'none', or None (the file's sizes
     #: where it sets any, else uniform); ``--size-weight`` (None: the default w).
     size: str | None = None
@@ -122,7 +125,8 @@ class RunConfig:
         sized = size not in (None, "none")
         return cls(geometry=geometry, conformal=not sized, size=size if sized else None,
                    levels=1, quads=True, quad_size=quad_size, quad_count=quad_count,
-                   mesh_size=quad_size, field_files=False, on_cad=True, **options)
+                   mesh_size=quad_size, field_files=False, on_cad=True,
+                   adapt_quad_size=quad_size is None and quad_count is None, **options)
 
     @property
     def label(self) -> str:
@@ -783,8 +787,9 @@ class _Solve:
                 with failures("the quad mesh"):
                     try:
                         root = stages.RootField(self.field) if root is None else root
-                        self.quads = stages.quadrangulate(root, quad_size=config.quad_size,
-                                                          quad_count=config.quad_count)
+                        self.quads = stages.quadrangulate(
+                            root, quad_size=config.quad_size, quad_count=config.quad_count,
+                            adapt_size=config.adapt_quad_size)
                     except ValueError as e:  # no valid integer-grid map: alike on every rank
                         raise RunError(str(e)) from e
             except RunError as e:  # the same on every rank: the field is written without it
@@ -794,6 +799,10 @@ class _Solve:
                 self._onto_cad()
         if self.quads is not None:
             found = self.quads.quality
+            adapted = found.get("adapted_size")
+            if adapted is not None:
+                say(f"  no valid quads at the default quad size {adapted['asked']:.3g}; "
+                    f"{adapted['used']:.3g} used ({adapted['why']})")
             say(f"  {found['quads']} quads, {found['irregular_vertices']} irregular vertices, "
                 f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"

@@ -148,7 +148,7 @@ COUNT_TOLERANCE = 0.05
 
 
 def quadrangulate(source, quad_size: float | None = None,
-                  quad_count: int | None = None) -> QuadMeshed:
+                  quad_count: int | None = None, adapt_size: bool = False) -> QuadMeshed:
     """The quad mesh of a field (:mod:`ufl_frames.quads`), on rank 0 (collective): the
     seamless map's T-mesh with integer arc lengths and its patches' grids
     (:func:`~ufl_frames.quads.patches.quads_of_map`), or where that fails or its worst quad
@@ -163,6 +163,9 @@ def quadrangulate(source, quad_size: float | None = None,
         quad_size: the quads' target mean edge length (default: the triangles' mean edge
             length, about one quad per two triangles).
         quad_count: about this many quads instead (:func:`quad_size_for_count`).
+        adapt_size: where no valid mesh comes out at the size, take the first smaller size
+            of :data:`SMALLER_SIZES` that gives one (recorded as ``adapted_size``: the
+            size asked for, the size used and why) instead of failing.
 
     Returns:
         The mesh and its measures (:func:`~ufl_frames.quads.measures.quad_quality`, with
@@ -181,7 +184,7 @@ def quadrangulate(source, quad_size: float | None = None,
 
     def work(mesh):
         if quad_count is None:
-            return _quad_mesh_or_advice(mesh, size)
+            return _quad_mesh_or_advice(mesh, size, adapt_size)
         chosen = quad_size_for_count(mesh, quad_count)
         kept = _quad_mesh_or_advice(mesh, chosen)
         for _ in range(COUNT_CORRECTIONS):  # the integer layout rounds the grid's count
@@ -225,18 +228,24 @@ def _euler(mesh) -> int:
 SMALLER_SIZES = (0.7, 0.5)
 
 
-def _quad_mesh_or_advice(mesh, size: float):
+def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
     """:func:`_quad_mesh`; where it fails, the error says which smaller quad size (of
-    :data:`SMALLER_SIZES`) gives a valid mesh by the layout, or that none of them does."""
+    :data:`SMALLER_SIZES`) gives a valid mesh, or that none of them does; with ``adapt``
+    that mesh is returned instead (its measures' ``adapted_size`` says so)."""
     try:
         return _quad_mesh(mesh, size)
     except ValueError as e:
         failure = str(e)
     for share in SMALLER_SIZES:
         try:
-            _quad_mesh(mesh, share * size, methods=("layout",))
+            found = _quad_mesh(mesh, share * size,
+                               methods=("layout", "greedy rounding") if adapt else ("layout",))
         except ValueError:
             continue
+        if adapt:
+            quad_mesh, quality = found
+            quality["adapted_size"] = {"asked": size, "used": share * size, "why": failure}
+            return quad_mesh, quality
         raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
     raise ValueError(f"{failure} (quad sizes {', '.join(f'{f * size:.3g}' for f in SMALLER_SIZES)} "
                      "fail too)")
