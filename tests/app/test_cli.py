@@ -292,7 +292,7 @@ def _write_bad_inputs(folder: Path) -> dict:
         "unknown name": ["trapezoid"],
         "missing file": ["missing.msh"],
         "corrupt file": ["corrupt.msh"],
-        "3D geometry": ["box.geo"],
+        "3D geometry on the 2D path": ["box.geo", "--dim", "2"],
         "unsupported file": ["notes.txt"],
     }
 

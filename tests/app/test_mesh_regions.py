@@ -315,11 +315,19 @@ def test_embedded_dolfinx_tags(embedded):
 
 
 def test_bare_file_keeps_its_entities(bare):
+    """A file without physical groups: its entities with their tags, each its own unnamed
+    group (group tag = entity tag), so that DOLFINx reads the surfaces back as cell tags."""
+    from dolfinx.io import gmsh as gmshio
+
     out, summary = bare
     assert summary["quads"]["valid"]
+    data = gmshio.read_from_msh(str(out / "quads.msh"), COMM, rank=0, gdim=2)
+    tags = {int(t) for part in COMM.allgather(np.unique(data.cell_tags.values).tolist())
+            for t in part}
+    assert tags == {1, 2}
     if COMM.rank == 0:
         back = ReadBack(out / "quads.msh")
-        assert back.groups == {}
+        assert set(back.groups) == {""}  # unnamed
         assert back.entities[2] == [1, 2]
         for surface, exact in BARE["surface_areas"].items():
             assert back.area([surface]) == pytest.approx(exact, rel=5e-3)

@@ -117,7 +117,9 @@ def test_log_polar_size_on_the_annulus(shared_tmp):
     assert sizes["h_ratio"] == pytest.approx(2.0, rel=1e-3)
     assert sizes["field"]["p90_abs_log"] < 0.01
     found = sizes["quads"]
-    assert found["log_correlation"] > 0.99
+    # 0.965 measured: since the circles' model points must be quad vertices the few quads
+    # at them are off the log-polar grid (0.99993 before); the issue's target is 0.9
+    assert found["log_correlation"] > 0.95
     assert 0.95 < found["ratio_p10"] and found["ratio_p90"] < 1.05
     assert abs(found["count_error"]) <= 0.1
 

@@ -150,14 +150,15 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads",
         groups: the geometry's physical groups
             (:attr:`ufl_frames.mesh.domain.Domain.physical_groups`), written to the
             ``.msh`` with the model's entities where the quad mesh has them
-            (:func:`~ufl_frames.quads.msh.write_quad_msh`).
+            (:func:`~ufl_frames.quads.msh.write_quad_msh`); none: one unnamed group per
+            entity (:func:`~ufl_frames.quads.msh.entity_groups`).
         skipped: as for :func:`write_field`.
 
     Returns:
         The names written, on every rank.
     """
     from ufl_frames.quads.measures import scaled_jacobians
-    from ufl_frames.quads.msh import plot_quads, write_quad_msh, write_quad_vtu
+    from ufl_frames.quads.msh import entity_groups, plot_quads, write_quad_msh, write_quad_vtu
 
     names = [f"{stem}.msh", f"{stem}.vtu"]
     out = Path(out)
@@ -165,6 +166,11 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads",
         mesh = quads.mesh
         model = {name: getattr(mesh, name, None) for name in (
             "quad_region", "curve_edges", "edge_curve", "point_nodes", "point_tag")}
+        if not groups and model["quad_region"] is not None:
+            # no groups in the geometry: one per model entity (tag = the entity's), so
+            # that DOLFINx, which reads tags from groups alone, reads the entities back
+            groups = entity_groups(model["quad_region"], model["edge_curve"],
+                                   model["point_tag"])
         write_quad_msh(out / names[0], mesh.points, mesh.quads, groups=groups, **model)
         write_quad_vtu(out / names[1], mesh.points, mesh.quads,
                        {"scaled_jacobian": scaled_jacobians(mesh.points, mesh.quads)})
