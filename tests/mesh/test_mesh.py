@@ -419,6 +419,16 @@ def test_tilted_plane_meshed_in_it_non_planar_and_empty_rejected(tmp_path):
     assert any("tilted plane" in note for note in domain.notes)
     assert area(domain.mesh) == pytest.approx(1.0, rel=1e-12)
     assert sorted(round(c.angle, 9) for c in domain.corners) == [round(np.pi / 2, 9)] * 4
+    # the domain's plane takes the mesh back into the tilted plane: the square's corners
+    c, s = np.cos(0.3), np.sin(0.3)
+    corners = np.array([[0, 0, 0], [1, 0, 0], [1, c, s], [0, c, s]])
+    xyz = domain.plane.to_3d(domain.mesh.geometry.x[:, :2])
+    assert np.abs(xyz @ np.array([0, -s, c])).max() < 1e-12
+    gathered = np.concatenate(COMM.allgather(xyz))
+    nearest = np.linalg.norm(gathered[None] - corners[:, None], axis=2).min(axis=1)
+    assert nearest.max() < 1e-12
+    assert np.allclose(domain.plane.to_plane(xyz), domain.mesh.geometry.x[:, :2], atol=1e-12)
+    assert load(COMM, MESHES / "piano.geo", mesh_size=0.2).plane is None
     bent = tmp_path / "bent.geo"  # two squares in two planes
     bent.write_text(
         'SetFactory("OpenCASCADE");\nRectangle(1) = {0, 0, 0, 1, 1};\n'
@@ -449,3 +459,37 @@ def test_bad_mesh_size(bad):
     raises_one_line("mesh_size", build, COMM, "piano", bad)
     raises_one_line("mesh_size", load, COMM, MESHES / "piano.geo", bad)
     raises_one_line("size_factor", build, COMM, "piano", 0.1, bad)
+
+
+def test_tilted_msh_keeps_its_plane(tmp_path_factory):
+    import gmsh
+
+    root = Path(COMM.bcast(str(tmp_path_factory.mktemp("tilted_msh")), root=0))
+    path = root / "tilted.msh"
+    c, s = np.cos(0.4), np.sin(0.4)
+    if COMM.rank == 0:  # a triangle mesh of the unit square tilted about y, moved up by 2
+        owns = not gmsh.isInitialized()
+        if owns:
+            gmsh.initialize(argv=[], readConfigFiles=False)
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("tilted")
+        gmsh.model.occ.addRectangle(0, 0, 0, 1, 1)
+        gmsh.model.occ.rotate([(2, 1)], 0, 0, 0, 0, 1, 0, 0.4)
+        gmsh.model.occ.translate([(2, 1)], 0, 0, 2)
+        gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.25)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+        gmsh.model.remove()
+        if owns:
+            gmsh.finalize()
+    COMM.Barrier()
+    domain = load(COMM, path)
+    assert domain.plane is not None
+    xyz = domain.plane.to_3d(domain.mesh.geometry.x[:, :2])
+    normal = np.array([s, 0, c])  # the rotated z axis
+    assert np.abs((xyz - [0, 0, 2]) @ normal).max() < 1e-12
+    assert abs(abs(np.dot(np.cross(domain.plane.e1, domain.plane.e2), normal)) - 1) < 1e-12
+    gathered = np.concatenate(COMM.allgather(xyz))
+    corners = np.array([[0, 0, 2], [c, 0, 2 - s], [c, 1, 2 - s], [0, 1, 2]])
+    assert np.linalg.norm(gathered[None] - corners[:, None], axis=2).min(axis=1).max() < 1e-12

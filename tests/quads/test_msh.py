@@ -149,6 +149,27 @@ def test_bad_model_arrays_are_refused(tmp_path):
         write_quad_msh(tmp_path / "a.msh", x, q, **{**m, "edge_curve": 0 * m["edge_curve"]})
     with pytest.raises(ValueError, match="outside"):
         write_quad_msh(tmp_path / "a.msh", x, q, **{**m, "point_nodes": m["point_nodes"] + 99})
+    with pytest.raises(ValueError, match="coordinates must be finite with shape"):
+        write_quad_msh(tmp_path / "a.msh", x, q, coordinates=np.zeros((len(x), 2)), **m)
+
+
+def test_written_at_given_3d_coordinates(tmp_path):
+    pytest.importorskip("gmsh")
+    from ufl_frames.quads.msh import write_quad_msh, write_quad_vtu
+
+    m = two_regions()
+    x, q = m.pop("points"), m.pop("quads")
+    xyz = np.c_[x, 0.5 * x[:, 0] - 2.0]  # the plate in the plane z = x/2 - 2
+    for model in (m, {}):  # with the model's entities, and the bare surface
+        path = write_quad_msh(tmp_path / "tilted.msh", x, q, coordinates=xyz, **model)
+        with _Reader(path) as gmsh:
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            assert np.array_equal(coords.reshape(-1, 3)[np.argsort(tags)], xyz)
+    from ufl_frames.output.vtk import read_vtk
+
+    back = read_vtk(write_quad_vtu(tmp_path / "tilted.vtu", xyz, q))
+    assert np.allclose(back["points"], xyz, rtol=0, atol=1e-12)
+    assert np.array_equal(back["cells"], q)
 
 
 def test_regions_read_back_by_dolfinx(tmp_path):

@@ -571,6 +571,19 @@ def _check_size_target(target, domain, comm) -> None:
         raise InputError(problems[0])
 
 
+def plane_record(plane) -> dict:
+    """``summary.json``'s ``plane``: the :class:`~ufl_frames.mesh.domain.Plane` of a
+    geometry in a tilted plane (its origin, axes and normal) and ``plane_note`` on which
+    files are in which coordinates; both None for a geometry in z = const."""
+    if plane is None:
+        return {"plane": None, "plane_note": None}
+    return {"plane": plane.record(),
+            "plane_note": "the geometry lies in a tilted plane: quads.msh and quads.vtu are "
+                          "in its original 3D coordinates; the frame field's files (frames.*, "
+                          "param.*) and the figures are in the plane's coordinates (u, v) = "
+                          "((p - origin)·e1, (p - origin)·e2)"}
+
+
 class _Solve:
     """The run after meshing: the field's solve with its monitors and checkpoints, the
     report, the stages and the output folder (the steps of :func:`run`).
@@ -863,7 +876,8 @@ class _Solve:
                     self.config.geometry, mesh.points, mesh.quads,
                     **{name: getattr(mesh, name, None) for name in (
                         "curve_edges", "edge_curve", "point_nodes", "point_tag")},
-                    time_limit=mesh_time_limit() if limit is None else limit)
+                    time_limit=mesh_time_limit() if limit is None else limit,
+                    plane=self.field.domain.plane)
             except GeometryError as e:
                 failure = str(e)
             else:
@@ -930,7 +944,7 @@ class _Solve:
         if self.quads is not None:
             names += files.write_quads(staging, self.quads, label, comm,
                                        groups=self.field.domain.physical_groups,
-                                       skipped=skipped)
+                                       skipped=skipped, plane=self.field.domain.plane)
         for name, reason in skipped:
             warn(comm, self.config.quiet, f"{name} could not be drawn ({reason}): left out")
         return [*names, "summary.json"]
@@ -972,6 +986,7 @@ class _Solve:
             **frames_record(self.field),
             "size_factor": float(config.size_factor),
             "loader_notes": list(self.field.domain.notes),
+            **plane_record(self.field.domain.plane),
             "max_it": int(self.max_it),
             "num_processes": comm.size,
             "tao_type": self.tao_type,

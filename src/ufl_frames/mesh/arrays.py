@@ -219,13 +219,36 @@ def plane_frame(xyz: np.ndarray, source: str):
     return origin, e1, e2
 
 
+_PLANE_ATTRIBUTE = "ufl_frames_plane"
+
+
+def record_plane(frame) -> None:
+    """Keep :func:`plane_frame`'s (origin, e1, e2) with the current Gmsh model (read back
+    by :func:`recorded_plane`)."""
+    gmsh.model.setAttribute(_PLANE_ATTRIBUTE,
+                            [repr(float(c)) for v in frame for c in np.ravel(v)])
+
+
+def recorded_plane():
+    """The :class:`~ufl_frames.mesh.domain.Plane` kept by :func:`record_plane` with the
+    current Gmsh model, None where none was."""
+    from ufl_frames.mesh.domain import Plane
+
+    if _PLANE_ATTRIBUTE not in gmsh.model.getAttributeNames():
+        return None
+    c = [float(v) for v in gmsh.model.getAttribute(_PLANE_ATTRIBUTE)]
+    return Plane(tuple(c[0:3]), tuple(c[3:6]), tuple(c[6:9]))
+
+
 def plane_coordinates(xyz: np.ndarray, source: str, notes: list[str]) -> np.ndarray:
     """(n, 2) coordinates of mesh nodes in their plane: x, y where it is z = const, else
-    the coordinates along :func:`plane_frame`'s axes (said in ``notes``)."""
+    the coordinates along :func:`plane_frame`'s axes (said in ``notes``, the frame kept
+    by :func:`record_plane`)."""
     frame = plane_frame(xyz, source)
     if frame is None:
         return np.ascontiguousarray(xyz[:, :2])
     origin, e1, e2 = frame
+    record_plane(frame)
     notes.append(f"the mesh lies in a tilted plane: meshed in its own coordinates "
                  f"(u, v) = ((p - o)·e1, (p - o)·e2), o = {_vector(origin)}, "
                  f"e1 = {_vector(e1)}, e2 = {_vector(e2)}")

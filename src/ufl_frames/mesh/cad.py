@@ -75,7 +75,8 @@ class CadSnap:
 
 
 def snap_to_cad(source: str, points, quads, curve_edges=None, edge_curve=None,
-                point_nodes=None, point_tag=None, time_limit: float = math.inf) -> CadSnap:
+                point_nodes=None, point_tag=None, time_limit: float = math.inf,
+                plane=None) -> CadSnap:
     """The quad mesh's curve and point nodes moved onto the CAD model of ``source``.
 
     Args:
@@ -89,6 +90,9 @@ def snap_to_cad(source: str, points, quads, curve_edges=None, edge_curve=None,
         point_tag: (p,) the model point's tag of each.
         time_limit: seconds for Gmsh to rebuild the model and project (a child process;
             ``math.inf``: in this process, no limit).
+        plane: the :class:`~ufl_frames.mesh.domain.Plane` of a model in a tilted plane
+            (``points`` are its (u, v) coordinates; projected in the model's own 3D
+            coordinates); None: a model in z = const.
 
     Returns:
         The moved points and the counts.
@@ -107,7 +111,7 @@ def snap_to_cad(source: str, points, quads, curve_edges=None, edge_curve=None,
     asked = _asked(x, q, curve_edges, edge_curve, point_nodes, point_tag)
 
     def work():
-        return _session(lambda: _targets(key, x, asked))
+        return _session(lambda: _targets(key, x, asked, plane))
 
     if math.isfinite(time_limit):
         from ufl_frames.mesh.distribute import _in_child
@@ -183,11 +187,12 @@ def _rebuild(source: str) -> None:
     _unite_surfaces([])
 
 
-def _targets(source: str, x: np.ndarray, asked: dict):
-    """(nodes, their targets (k, 2)) on the rebuilt model of ``source``."""
+def _targets(source: str, x: np.ndarray, asked: dict, plane=None):
+    """(nodes, their targets (k, 2)) on the rebuilt model of ``source`` (in ``plane``'s
+    coordinates where it is given)."""
     _rebuild(source)
     if "boundary" in asked:
-        return _nearest_targets(x, asked["boundary"], asked["tolerance"])
+        return _nearest_targets(x, asked["boundary"], asked["tolerance"], plane)
     nodes, targets = [], []
     point_nodes, point_tags = asked["points"]
     known = {tag for _, tag in gmsh.model.getEntities(0)}
@@ -195,7 +200,7 @@ def _targets(source: str, x: np.ndarray, asked: dict):
         if tag not in known:
             raise GeometryError(f"model point {tag} is not in {source!r}")
         nodes.append(node)
-        targets.append(np.asarray(gmsh.model.getValue(0, tag, []))[:2])
+        targets.append(_point(tag, plane))
     curve_nodes, curve_tags = asked["curves"]
     known = {tag for _, tag in gmsh.model.getEntities(1)}
     for tag in np.unique(curve_tags).tolist():
@@ -203,20 +208,28 @@ def _targets(source: str, x: np.ndarray, asked: dict):
             raise GeometryError(f"model curve {tag} is not in {source!r}")
         mine = curve_nodes[curve_tags == tag]
         nodes += mine.tolist()
-        targets += list(_closest(tag, x[mine]))
+        targets += list(_closest(tag, x[mine], plane))
     return np.asarray(nodes, dtype=np.int64), np.asarray(targets, dtype=float).reshape(-1, 2)
 
 
-def _closest(curve: int, x: np.ndarray) -> np.ndarray:
-    """The closest points (k, 2) of ``x`` on the model curve ``curve``."""
+def _point(tag: int, plane=None) -> np.ndarray:
+    """The model point ``tag``'s (2,) coordinates (in ``plane``'s where it is given)."""
+    xyz = np.asarray(gmsh.model.getValue(0, tag, []), dtype=float)
+    return xyz[:2] if plane is None else plane.to_plane(xyz)[0]
+
+
+def _closest(curve: int, x: np.ndarray, plane=None) -> np.ndarray:
+    """The closest points (k, 2) of ``x`` on the model curve ``curve`` (``x`` and the
+    points in ``plane``'s coordinates where it is given)."""
     if not x.shape[0]:
         return np.zeros((0, 2))
-    xyz = np.c_[x, np.zeros(x.shape[0])]
+    xyz = np.c_[x, np.zeros(x.shape[0])] if plane is None else plane.to_3d(x)
     closest, _ = gmsh.model.getClosestPoint(1, curve, xyz.ravel())
-    return np.asarray(closest, dtype=float).reshape(-1, 3)[:, :2]
+    closest = np.asarray(closest, dtype=float).reshape(-1, 3)
+    return closest[:, :2] if plane is None else plane.to_plane(closest)
 
 
-def _nearest_targets(x: np.ndarray, boundary: np.ndarray, tolerance: float):
+def _nearest_targets(x: np.ndarray, boundary: np.ndarray, tolerance: float, plane=None):
     """Without curve edges: each boundary node to the closest boundary curve; the node
     closest to each model point on the boundary onto it, within ``tolerance``."""
     surfaces = gmsh.model.getEntities(2)
@@ -225,12 +238,12 @@ def _nearest_targets(x: np.ndarray, boundary: np.ndarray, tolerance: float):
                                                                     oriented=False)})
     if not curves or not boundary.size:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    candidates = np.stack([_closest(c, x[boundary]) for c in curves])  # (curves, k, 2)
+    candidates = np.stack([_closest(c, x[boundary], plane) for c in curves])  # (curves, k, 2)
     distance = np.linalg.norm(candidates - x[boundary][None], axis=2)
     targets = candidates[np.argmin(distance, axis=0), np.arange(boundary.size)]
     ends = gmsh.model.getBoundary([(1, c) for c in curves], combined=False, oriented=False)
     for tag in sorted({abs(t) for _, t in ends}):
-        point = np.asarray(gmsh.model.getValue(0, tag, []))[:2]
+        point = _point(tag, plane)
         gap = np.linalg.norm(x[boundary] - point, axis=1)
         nearest = int(np.argmin(gap))
         if gap[nearest] <= tolerance:

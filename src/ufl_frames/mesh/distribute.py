@@ -38,6 +38,7 @@ from ufl_frames.mesh.arrays import (  # noqa: E402
     mean_edge_length,
     mesh_arrays,
     mesh_corners,
+    recorded_plane,
 )
 from ufl_frames.mesh.domain import Domain, GeometryError, MeshTimeLimit, one_line  # noqa: E402
 
@@ -143,6 +144,7 @@ def _gmsh_session(make, source: str, cad: bool):
             "directions": directions,
             "junctions": tuple(junctions),
             "groups": arrays.physical_groups,
+            "plane": recorded_plane(),
         }
         return arrays, info
     except GeometryError:
@@ -301,6 +303,7 @@ def _distribute(comm: MPI.Comm, arrays: MeshArrays | None, info: dict, source: s
         curve_tags=model[1],
         point_tags=model[0],
         junctions=info["junctions"],
+        plane=info.get("plane"),
         _direction_nodes=nodes,
         _direction_angles=angles,
     )

@@ -85,6 +85,34 @@ class PhysicalGroup:
     entities: tuple[int, ...]
 
 
+@dataclass(frozen=True)
+class Plane:
+    """The plane of a surface that lies in no plane z = const: a point ``origin`` and two
+    orthonormal axes ``e1``, ``e2`` (e1 × e2 its normal). The mesh's coordinates are then
+    (u, v) = ((p − o)·e1, (p − o)·e2), and p = o + u e1 + v e2 the original point."""
+
+    origin: tuple[float, float, float]
+    e1: tuple[float, float, float]
+    e2: tuple[float, float, float]
+
+    def to_3d(self, uv) -> np.ndarray:
+        """The original (n, 3) points of plane coordinates ``uv`` (n, 2)."""
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        return (np.asarray(self.origin) + uv[:, :1] * np.asarray(self.e1)
+                + uv[:, 1:] * np.asarray(self.e2))
+
+    def to_plane(self, xyz) -> np.ndarray:
+        """The plane coordinates (n, 2) of points ``xyz`` (n, 3)."""
+        d = np.asarray(xyz, dtype=float).reshape(-1, 3) - np.asarray(self.origin)
+        return np.stack([d @ np.asarray(self.e1), d @ np.asarray(self.e2)], axis=1)
+
+    def record(self) -> dict:
+        """The plane as JSON-ready lists: origin, e1, e2 and the normal."""
+        normal = np.cross(self.e1, self.e2)
+        return {"origin": list(self.origin), "e1": list(self.e1), "e2": list(self.e2),
+                "normal": [float(c) for c in normal]}
+
+
 @dataclass
 class Domain:
     """A meshed planar domain: what the frame-field pipeline needs of the geometry.
@@ -96,6 +124,8 @@ class Domain:
     ``mesh_size`` is the mean edge length of the mesh; ``requested_mesh_size`` the
     size Gmsh was asked for (None: the file's own sizes, or a ``.msh``).
     ``notes`` lists what the loader changed or dropped, one line each.
+    ``plane`` is the :class:`Plane` of a surface in a tilted plane (the mesh is in its
+    (u, v) coordinates), None for one in z = const (the mesh's x, y).
 
     The model entities: ``cell_tags`` the surface (region) of every cell;
     ``curve_tags`` every facet on a model curve, on the boundary and inside (interfaces
@@ -120,6 +150,7 @@ class Domain:
     curve_tags: dolfinx.mesh.MeshTags | None = None
     point_tags: dolfinx.mesh.MeshTags | None = None
     junctions: tuple[Junction, ...] = ()
+    plane: Plane | None = None
     #: Curve directions from the CAD model (boundary and interior curves): sorted input
     #: node indices and the cross angle ψ (a tangent's angle, mod π/2) at each of them.
     _direction_nodes: np.ndarray = field(default=None, repr=False)

@@ -28,8 +28,9 @@ mesh of the whole planar domain:
   ``.geo`` includes or merges it.
 
 The geometry must lie in one plane: a model in a plane other than z = const is rotated into
-z = 0 and meshed there (:func:`_into_own_plane`, the frame in the notes), a ``.msh`` in one
-is read in its own coordinates; volumes and tetrahedra are rejected.
+z = 0 and meshed there (:func:`_into_own_plane`, the frame in the notes and the domain's
+``plane``, which takes the results back into the tilted plane), a ``.msh`` in one is read
+in its own coordinates (the same); volumes and tetrahedra are rejected.
 """
 
 import contextlib
@@ -48,7 +49,7 @@ import gmsh  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
-from ufl_frames.mesh.arrays import plane_frame, surfaces  # noqa: E402
+from ufl_frames.mesh.arrays import plane_frame, record_plane, surfaces  # noqa: E402
 from ufl_frames.mesh.distribute import create, verbose  # noqa: E402
 from ufl_frames.mesh.domain import (  # noqa: E402
     Domain,
@@ -255,7 +256,8 @@ def _into_own_plane(source: str, notes: list[str]) -> None:
     """Rotate a model that lies in a plane other than z = const into z = 0 (its points
     and points along its curves, :func:`~ufl_frames.mesh.arrays.plane_frame`): its mesh
     coordinates are then (u, v) along the plane's axes e1, e2 from its origin o, said in
-    ``notes``. Raises :class:`GeometryError` where the model lies in no plane."""
+    ``notes`` and kept (:func:`~ufl_frames.mesh.arrays.record_plane`, the domain's
+    ``plane``). Raises :class:`GeometryError` where the model lies in no plane."""
     samples = [np.asarray(gmsh.model.getValue(0, tag, []), dtype=float)
                for _, tag in gmsh.model.getEntities(0)]
     for _, curve in gmsh.model.getEntities(1):
@@ -295,6 +297,7 @@ def _into_own_plane(source: str, notes: list[str]) -> None:
     if check and float(np.ptp(check)) > 1e-8 * scale:
         raise GeometryError(f"{source!r} lies in a tilted plane that could not be rotated into "
                             "z = 0 (mixed CAD kernels?)")
+    record_plane(frame)
     notes.append("the geometry lies in a tilted plane: meshed in its own coordinates "
                  f"(u, v) = ((p - o)·e1, (p - o)·e2), o = {_vector(origin)}, "
                  f"e1 = {_vector(e1)}, e2 = {_vector(e2)}")

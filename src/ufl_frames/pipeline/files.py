@@ -136,7 +136,7 @@ def write_param(out, param, label: str, comm, stem: str = "param",
 
 
 def write_quads(out, quads, label: str, comm, stem: str = "quads",
-                groups=(), skipped: list | None = None) -> list[str]:
+                groups=(), skipped: list | None = None, plane=None) -> list[str]:
     """``<stem>.msh`` (Gmsh MSH 4.1), ``<stem>.vtu`` (scaled Jacobian per quad) and
     ``<stem>.png`` of a :class:`~ufl_frames.pipeline.stages.QuadMeshed` ``quads``, written
     by rank 0 of ``comm`` into the folder ``out`` (collective).
@@ -153,6 +153,9 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads",
             (:func:`~ufl_frames.quads.msh.write_quad_msh`); none: one unnamed group per
             entity (:func:`~ufl_frames.quads.msh.entity_groups`).
         skipped: as for :func:`write_field`.
+        plane: the geometry's :class:`~ufl_frames.mesh.domain.Plane` where it lies in a
+            tilted plane (:attr:`ufl_frames.mesh.domain.Domain.plane`): the ``.msh`` and
+            ``.vtu`` are written in its original 3D coordinates; None: (x, y, 0).
 
     Returns:
         The names written, on every rank.
@@ -171,8 +174,10 @@ def write_quads(out, quads, label: str, comm, stem: str = "quads",
             # that DOLFINx, which reads tags from groups alone, reads the entities back
             groups = entity_groups(model["quad_region"], model["edge_curve"],
                                    model["point_tag"])
-        write_quad_msh(out / names[0], mesh.points, mesh.quads, groups=groups, **model)
-        write_quad_vtu(out / names[1], mesh.points, mesh.quads,
+        xyz = None if plane is None else plane.to_3d(mesh.points)
+        write_quad_msh(out / names[0], mesh.points, mesh.quads, groups=groups,
+                       coordinates=xyz, **model)
+        write_quad_vtu(out / names[1], mesh.points if xyz is None else xyz, mesh.quads,
                        {"scaled_jacobian": scaled_jacobians(mesh.points, mesh.quads)})
     comm.Barrier()
 

@@ -87,11 +87,11 @@ def mesh_boundary_edges(quads) -> np.ndarray:
     return directed[counts[inverse.ravel()] == 1]
 
 
-def _add_quads(gmsh, x: np.ndarray, q: np.ndarray, lines: np.ndarray) -> tuple[int, int | None]:
-    """Nodes (tags 1..n), quads (tags 1..m) and lines (m+1..) in the current model, on a
-    discrete surface and, if there are lines, a discrete curve bounding it."""
-    n, m = x.shape[0], q.shape[0]
-    xyz = np.c_[x, np.zeros(n)]
+def _add_quads(gmsh, xyz: np.ndarray, q: np.ndarray, lines: np.ndarray) -> tuple[int, int | None]:
+    """Nodes (tags 1..n) at ``xyz`` (n, 3), quads (tags 1..m) and lines (m+1..) in the
+    current model, on a discrete surface and, if there are lines, a discrete curve
+    bounding it."""
+    n, m = xyz.shape[0], q.shape[0]
     tags = np.arange(1, n + 1)
     curve = gmsh.model.addDiscreteEntity(1) if lines.size else None
     surface = gmsh.model.addDiscreteEntity(2, -1, [curve] if curve else [])
@@ -111,7 +111,7 @@ def _add_quads(gmsh, x: np.ndarray, q: np.ndarray, lines: np.ndarray) -> tuple[i
 
 def write_quad_msh(path, points, quads, boundary_edges=None, *, quad_region=None,
                    curve_edges=None, edge_curve=None, point_nodes=None, point_tag=None,
-                   groups=()) -> Path:
+                   groups=(), coordinates=None) -> Path:
     """Write the quad mesh as Gmsh MSH 4.1 (ASCII) to ``path`` (a ``.msh`` file).
 
     Without ``quad_region``, ``curve_edges`` and ``point_nodes``: one surface (physical
@@ -138,6 +138,8 @@ def write_quad_msh(path, points, quads, boundary_edges=None, *, quad_region=None
         point_nodes: (p,) points at model points.
         point_tag: (p,) the model point's tag of each (> 0).
         groups: the physical groups, as above.
+        coordinates: (n, 3) the nodes' coordinates written (a surface in a tilted plane
+            written in it); None: (x, y, 0) of ``points``.
 
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
@@ -150,6 +152,11 @@ def write_quad_msh(path, points, quads, boundary_edges=None, *, quad_region=None
     if path.suffix.lower() != ".msh":
         raise ValueError(f"write_quad_msh writes .msh files, got {str(path)!r}")
     x, q = _arrays(points, quads)
+    xyz = np.c_[x, np.zeros(x.shape[0])] if coordinates is None else np.asarray(
+        coordinates, dtype=float)
+    if xyz.shape != (x.shape[0], 3) or not np.all(np.isfinite(xyz)):
+        raise ValueError(f"coordinates must be finite with shape ({x.shape[0]}, 3), "
+                         f"got {xyz.shape}")
     model = quad_region is not None or curve_edges is not None or point_nodes is not None
     if model:
         entities = _model_entities(x.shape[0], q, quad_region, curve_edges, edge_curve,
@@ -160,7 +167,7 @@ def write_quad_msh(path, points, quads, boundary_edges=None, *, quad_region=None
         lines = _indices(lines.reshape(-1, 2), x.shape[0], "boundary edges")
     with _gmsh_model(f"quads_{path.stem}") as gmsh:
         if model:
-            written = _add_model(gmsh, x, q, entities)
+            written = _add_model(gmsh, xyz, q, entities)
             for group in groups:
                 dim, tag = int(group.dim), int(group.tag)
                 kept = [int(e) for e in group.entities if (dim, int(e)) in written]
@@ -168,7 +175,7 @@ def write_quad_msh(path, points, quads, boundary_edges=None, *, quad_region=None
                     gmsh.model.addPhysicalGroup(dim, kept, tag, name=str(group.name))
             save_all = 0 if gmsh.model.getPhysicalGroups() else 1
         else:
-            surface, curve = _add_quads(gmsh, x, q, lines)
+            surface, curve = _add_quads(gmsh, xyz, q, lines)
             gmsh.model.addPhysicalGroup(2, [surface], DOMAIN_TAG, name="domain")
             if curve is not None:
                 gmsh.model.addPhysicalGroup(1, [curve], BOUNDARY_TAG, name="boundary")
@@ -249,11 +256,10 @@ def _model_entities(n: int, q: np.ndarray, quad_region, curve_edges, edge_curve,
                 owner=owner, bounding=bounding)
 
 
-def _add_model(gmsh, x: np.ndarray, q: np.ndarray, e: dict) -> set:
+def _add_model(gmsh, xyz: np.ndarray, q: np.ndarray, e: dict) -> set:
     """The entities of :func:`_model_entities` with their nodes and elements in the current
-    model; the (dim, tag) pairs written."""
-    n, m = x.shape[0], q.shape[0]
-    xyz = np.c_[x, np.zeros(n)]
+    model, nodes at ``xyz`` (n, 3); the (dim, tag) pairs written."""
+    n, m = xyz.shape[0], q.shape[0]
     node_tags = np.arange(1, n + 1)
     written = set()
     for p in np.unique(e["point"]):
@@ -312,7 +318,7 @@ def write_quad_vtu(path, points, quads, cell_data: dict | None = None) -> Path:
 
     Args:
         path: the file to write.
-        points: the points (n, 2) (written with z = 0).
+        points: the points (n, 2) (written with z = 0) or (n, 3).
         quads: point indices (m, 4).
         cell_data: arrays per quad by name (None: none).
 
@@ -324,7 +330,11 @@ def write_quad_vtu(path, points, quads, cell_data: dict | None = None) -> Path:
     """
     from ufl_frames.output.vtk import write_vtu
 
-    x, q = _arrays(points, quads)
+    x = np.asarray(points, dtype=float)
+    if x.ndim == 2 and x.shape[1] == 3:
+        _, q = _arrays(x[:, :2], quads)
+    else:
+        x, q = _arrays(points, quads)
     return write_vtu(path, x, q, "quad", cell_data=cell_data)
 
 
