@@ -90,3 +90,20 @@ def test_stage_at_a_finer_size(size):
     assert record["valid"]
     interface = quads.curve_edges[quads.edge_curve == 7]
     assert np.abs(quads.points[interface.ravel(), 0] - 0.43).max() < 1e-9
+
+
+def test_a_size_too_coarse_is_adapted_where_asked():
+    """The annulus (0.5 wide) at quad size 2: no quad fits across. Without ``adapt`` the
+    refusal names the smaller size that works; with it that size's mesh is returned, and
+    its measures say which size was asked, which was used and why."""
+    from planar_meshes import annulus, annulus_field
+
+    x, cells = annulus(8, 64)
+    mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    with pytest.raises(ValueError, match=r"\(quad size 1\.4 works\)"):
+        _quad_mesh_or_advice(mesh, 2.0)
+    quads, quality = _quad_mesh_or_advice(mesh, 2.0, adapt=True)
+    adapted = quality["adapted_size"]
+    assert adapted["asked"] == 2.0 and adapted["used"] == pytest.approx(1.4)
+    assert "quad size 2" in adapted["why"]
+    assert quality["valid"] and quads.num_quads > 0

@@ -306,7 +306,7 @@ def gmsh_quality(points, quads, measure: str = "minSJ") -> np.ndarray:
     """
     x, q = _arrays(points, quads)
     with _gmsh_model("quads_quality") as gmsh:
-        _add_quads(gmsh, x, q, np.zeros((0, 2), dtype=np.int64))
+        _add_quads(gmsh, np.c_[x, np.zeros(x.shape[0])], q, np.zeros((0, 2), dtype=np.int64))
         return np.asarray(
             gmsh.model.mesh.getElementQualities(np.arange(1, q.shape[0] + 1), measure),
             dtype=float)
