@@ -55,23 +55,13 @@ def defines_volumes(path, time_limit: float | None = None) -> bool:
 
 def _open_and_look(path) -> bool:
     """Gmsh's look at ``path``: volumes in the model, or tetrahedra in a ``.msh``."""
-    import gmsh
+    from ufl_frames.gmsh_scratch import scratch_model
 
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("ufl_frames_probe")
+    with scratch_model("ufl_frames_probe") as gmsh:
         gmsh.merge(str(path))
         if Path(path).suffix.lower() == ".msh":
             return bool(gmsh.model.mesh.getElementsByType(4)[0].size)
         return bool(gmsh.model.getEntities(3))
-    finally:
-        if owns:
-            gmsh.finalize()
-        else:
-            gmsh.model.remove()
 
 
 #: STEP entities of solids (ISO 10303-42).

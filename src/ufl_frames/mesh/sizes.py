@@ -328,19 +328,8 @@ def read_file_sizes(path: str) -> np.ndarray | None:
     """:func:`file_size_samples` of the geometry file ``path``, opened in Gmsh for that
     alone (the current process; Gmsh initialised here if it is not): None where the file
     sets no sizes. Rank 0's work."""
-    import gmsh
+    from ufl_frames.gmsh_scratch import scratch_model
 
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("ufl_frames_sizes")
+    with scratch_model("ufl_frames_sizes") as gmsh:
         gmsh.open(str(path))
-        try:
-            return file_size_samples()
-        finally:
-            gmsh.model.remove()
-    finally:
-        if owns:
-            gmsh.finalize()
+        return file_size_samples()

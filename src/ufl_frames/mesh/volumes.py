@@ -26,6 +26,7 @@ import gmsh  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
+from ufl_frames.gmsh_scratch import scratch_model  # noqa: E402
 from ufl_frames.mesh.domain import GeometryError, check_mesh_size, lookup, one_line  # noqa: E402
 
 __all__ = ["Volume", "ball", "box", "hollow_cylinder", "load"]
@@ -126,7 +127,6 @@ def load(comm: MPI.Comm, path, mesh_size: float | None = None) -> Volume:
             return
         if not gmsh.model.getEntities(3):
             raise GeometryError(f"{source!r} defines no volume")
-        gmsh.model.occ.synchronize() if gmsh.model.occ.getEntities(3) else None
 
     return _create(comm, make, source, mesh_size, cad=path.suffix.lower() != ".msh")
 
@@ -154,13 +154,9 @@ def _create(comm: MPI.Comm, make, source: str, mesh_size: float | None,
 
 
 def _mesh_on_root(make, source, mesh_size, cad):
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
-    previous = None if owns else gmsh.model.getCurrent()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add(f"ufl_frames_volume_{id(make):x}")
+    """``make()``'s model (a fresh one, :func:`~ufl_frames.gmsh_scratch.scratch_model`)
+    meshed with tetrahedra unless it holds some, as :func:`_arrays`."""
+    with scratch_model(f"ufl_frames_volume_{id(make):x}", ("Mesh.MeshSizeMax",)):
         make()
         gmsh.model.occ.synchronize()
         if not gmsh.model.mesh.getElementsByType(_TET)[0].size:
@@ -170,13 +166,6 @@ def _mesh_on_root(make, source, mesh_size, cad):
             gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
             gmsh.model.mesh.generate(3)
         return _arrays(source, cad)
-    finally:
-        if owns:
-            gmsh.finalize()
-        else:
-            gmsh.model.remove()
-            if previous:
-                gmsh.model.setCurrent(previous)
 
 
 def _arrays(source: str, cad: bool) -> dict:

@@ -27,11 +27,11 @@ caller had initialised it; then the caller's current model and the options touch
 are restored.
 """
 
-import contextlib
 from pathlib import Path
 
 import numpy as np
 
+from ufl_frames.gmsh_scratch import scratch_model
 from ufl_frames.quads.measures import _arrays, scaled_jacobians, vertex_valence
 
 __all__ = ["entity_groups", "gmsh_quality", "mesh_boundary_edges", "plot_quads",
@@ -49,33 +49,10 @@ _TOUCHED_OPTIONS = ("General.Terminal", "Mesh.MshFileVersion", "Mesh.Binary",
                     "Mesh.SaveAll")
 
 
-@contextlib.contextmanager
 def _gmsh_model(name: str):
-    """A fresh Gmsh model, current inside the block; Gmsh left as it was found."""
-    import gmsh
-
-    owns = not gmsh.isInitialized()
-    saved, previous = {}, None
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False, interruptible=False)
-    else:
-        saved = {k: gmsh.option.getNumber(k) for k in _TOUCHED_OPTIONS}
-        previous = gmsh.model.getCurrent()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add(name)
-        yield gmsh
-    finally:
-        if owns:
-            gmsh.finalize()
-        elif gmsh.isInitialized():
-            try:
-                gmsh.model.remove()
-                if previous:
-                    gmsh.model.setCurrent(previous)
-            finally:
-                for key, value in saved.items():
-                    gmsh.option.setNumber(key, value)
+    """A fresh Gmsh model (:func:`ufl_frames.gmsh_scratch.scratch_model`) whose file
+    options this module may set."""
+    return scratch_model(name, _TOUCHED_OPTIONS)
 
 
 def mesh_boundary_edges(quads) -> np.ndarray:
