@@ -85,3 +85,99 @@ def test_bad_volume_input_is_refused():
 
     with pytest.raises(GeometryError, match="not found"):
         volumes.load(COMM, "/nonexistent/part.step")
+
+
+# A CAD part with fillets (OpenCASCADE): the plate [0, 1] × [0, 0.6] × [0, 0.3] with a
+# vertical through hole (centre (0.4, 0.3), radius 0.12) and its two vertical edges at
+# x = 1 rounded with radius 0.2 (axes at (0.8, 0.2) and (0.8, 0.4)).
+FILLETED_PLATE_GEO = """SetFactory("OpenCASCADE");
+Box(1) = {0, 0, 0, 1, 0.6, 0.3};
+Cylinder(2) = {0.4, 0.3, -0.1, 0, 0, 0.5, 0.12};
+BooleanDifference(3) = {Volume{1}; Delete;}{Volume{2}; Delete;};
+e() = Curve In BoundingBox{0.99, -0.01, -0.01, 1.01, 0.01, 0.31};
+e() += Curve In BoundingBox{0.99, 0.59, -0.01, 1.01, 0.61, 0.31};
+Fillet{3}{e()}{0.2}
+"""
+
+
+def plate_normals(x: np.ndarray, tol: float = 1e-6) -> list[list[np.ndarray]]:
+    """The exact unit normals of the filleted plate's surfaces through each point of
+    ``x`` (n, 3): none inside, one on a face, two or three on a sharp edge or corner."""
+    out = []
+    for p in x:
+        ns = []
+        if abs(p[2]) < tol or abs(p[2] - 0.3) < tol:  # bottom, top
+            ns.append(np.array([0.0, 0.0, 1.0]))
+        xy = p[:2]
+        for centre, radius, inside in (((0.4, 0.3), 0.12, None),  # the hole
+                                       ((0.8, 0.2), 0.2, lambda q: q[0] > 0.8 and q[1] < 0.2),
+                                       ((0.8, 0.4), 0.2, lambda q: q[0] > 0.8 and q[1] > 0.4)):
+            d = xy - np.array(centre)
+            if abs(np.linalg.norm(d) - radius) < tol and (inside is None or inside(xy)):
+                ns.append(np.array([*(d / radius), 0.0]))
+        if abs(p[0]) < tol or (abs(p[0] - 1) < tol and 0.2 <= p[1] <= 0.4):
+            ns.append(np.array([1.0, 0.0, 0.0]))
+        if (abs(p[1]) < tol or abs(p[1] - 0.6) < tol) and p[0] <= 0.8:
+            ns.append(np.array([0.0, 1.0, 0.0]))
+        # a fillet meets its planes tangentially: keep one of equal normals
+        distinct = []
+        for n in ns:
+            if all(abs(n @ m) < 1 - 1e-9 for m in distinct):
+                distinct.append(n)
+        out.append(distinct)
+    return out
+
+
+@pytest.fixture(scope="module")
+def filleted_plate(tmp_path_factory):
+    path = None
+    if COMM.rank == 0:
+        path = tmp_path_factory.mktemp("filleted") / "plate.geo"
+        path.write_text(FILLETED_PLATE_GEO)
+    return COMM.bcast(str(path) if path else None, root=0)
+
+
+def test_filleted_part_follows_its_cad_normals(filleted_plate):
+    """On a CAD part with fillets, a hole and sharp edges: every boundary vertex's frame
+    has an axis along each exact surface normal there (one on a face or across a fillet's
+    tangent edge, two on a sharp edge: one axis along the edge), the loader holds exactly
+    the vertices on sharp edges, and the singular curves end on the boundary."""
+    from ufl_frames.fem.gather import input_node_order
+
+    volume = volumes.load(COMM, filleted_plate, mesh_size=0.1)
+    q = mbo_frame_field_3d(volume)
+    (_, _), (features, _) = volume.boundary_frames(q.function_space)
+    held = np.unique(np.concatenate(COMM.allgather(input_node_order(q.function_space)[features])))
+    x, cells, rows = gather_p1_field(q)
+    if COMM.rank:
+        return
+    normals = plate_normals(x)
+    on_boundary = singular.boundary_vertices(cells)
+    counts = np.array([len(ns) for ns in normals])
+    assert np.array_equal(counts > 0, on_boundary)  # the exact surfaces are the boundary
+    assert np.count_nonzero(counts == 1) > 100 and np.count_nonzero(counts >= 2) > 20
+    assert np.array_equal(held, np.flatnonzero(counts >= 2))  # sharp edges and corners
+    _, R = odeco.q_to_frames(rows)
+    worst = max(1 - np.abs(R[i].T @ n).max() for i in np.flatnonzero(on_boundary)
+                for n in normals[i])
+    assert worst < 1e-9
+    graph = singular.singular_graph(cells, rows, x)
+    assert len(graph.edges) > 0  # the hole and the two fillets call for singular curves
+    assert graph.open_ends.size == 0
+    assert on_boundary[graph.edges.ravel()].any()  # some end on the boundary
+
+
+def test_filleted_part_serial_and_parallel_agree(filleted_plate):
+    """The same singular edges and the same frames (up to the cube's symmetry, to the
+    solver's tolerance) on this communicator and on one process."""
+    _, _, rows = field_on_root(volumes.load(COMM, filleted_plate, mesh_size=0.1))
+    alone = (volumes.load(MPI.COMM_SELF, filleted_plate, mesh_size=0.1)
+             if COMM.rank == 0 else None)
+    if COMM.rank:
+        return
+    x, cells, alone_rows = field_on_root(alone)
+    assert np.abs(rows - alone_rows).max() < 1e-8
+    mine = singular.singular_graph(cells, rows, x)
+    theirs = singular.singular_graph(cells, alone_rows, x)
+    assert len(mine.edges) > 0
+    assert np.array_equal(mine.edges, theirs.edges)
