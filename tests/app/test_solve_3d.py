@@ -55,6 +55,29 @@ def test_ball_builtin_has_a_valid_singular_graph(tmp_path_factory):
     assert lines["cells"].shape == (graph["edges"], 2)
 
 
+STEP_PART = Path(__file__).resolve().parents[2] / "benchmarks" / "shapes3d" / "gmsh_part.step"
+
+
+def test_real_step_part_with_fillets(tmp_path_factory):
+    """Gmsh's benchmark part (a public STEP bracket with filleted corners, see
+    benchmarks/shapes3d/SOURCES.md), coarse: the 3D path, sharp edges held, a singular
+    graph with no open end inside; the frames on the flat bottom face have an axis along z."""
+    out = folder(tmp_path_factory, "step3d") / "out"
+    assert cli.main(["solve", str(STEP_PART), "--mesh-size", "12", "--out", str(out),
+                     "-q"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["dimension"] == 3 and summary["ranks"] == COMM.size
+    assert summary["boundary_vertices"]["sharp"] > 0
+    graph = summary["singular_graph"]
+    assert graph["edges"] > 0 and graph["open_ends"] == 0
+    frames = read_vtk(out / "frames3d.vtu")
+    x = frames["points"]
+    bottom = np.isclose(x[:, 2], x[:, 2].min(), rtol=0, atol=1e-6)
+    assert np.count_nonzero(bottom) > 30
+    u = np.stack([frames["point_data"][f"u{i}"] for i in (1, 2, 3)], axis=1)  # (n, 3, 3)
+    assert (1 - np.abs(u[bottom, :, 2]).max(axis=1)).max() < 1e-9
+
+
 @pytest.mark.parametrize("argv, message", [
     (["solve", "ball", "--quads"], "not available for 3D"),
     (["solve", "cylinder", "--isotropic"], "not available for 3D"),

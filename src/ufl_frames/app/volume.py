@@ -131,6 +131,9 @@ def run_volume(config, comm=None) -> dict:
         raise InputError(str(e)) from e
     say(f"  {volume.num_cells} tetrahedra (mean edge {volume.mesh_size:.3g}), {comm.size} "
         f"process{'es' if comm.size > 1 else ''}")
+    aligned, sharp = volume.num_boundary_vertices
+    say(f"  boundary: {aligned} vertices aligned with their surface's normal, {sharp} on "
+        "sharp edges and corners (frames held)")
     say("MBO initial field (15 coefficients) ...")
     result = solve_volume(volume, say=say)
     graph = result.summary["singular_graph"]

@@ -65,6 +65,12 @@ class Volume:
     def num_cells(self) -> int:
         return self.mesh.topology.index_map(3).size_global
 
+    @property
+    def num_boundary_vertices(self) -> tuple[int, int]:
+        """(vertices with one normal: frames aligned with it, vertices on sharp features:
+        frames held) on the whole boundary."""
+        return int(self._aligned_nodes.size), int(self._feature_nodes.size)
+
     def boundary_frames(self, V):
         """The boundary rows of the P1 space ``V`` (local, owned and ghost): (aligned rows,
         their unit normals (k, 3)), (feature rows, their rotations (f, 3, 3))."""

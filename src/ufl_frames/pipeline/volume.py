@@ -28,7 +28,8 @@ class VolumeField:
     """A 3D frame field and what was measured of it.
 
     ``q`` is the distributed P1 field (15 coefficients); ``summary`` the same dict on
-    every rank (mesh counts, MBO seconds and levels, the singular graph's counts);
+    every rank (mesh counts, boundary vertices aligned with one normal or held on sharp
+    features, MBO seconds and levels, the singular graph's counts);
     ``arrays`` (x, cells, rows) and ``graph`` (a
     :class:`~ufl_frames.frames3d.singular.SingularGraph`) on rank 0, None elsewhere.
     """
@@ -76,6 +77,8 @@ def solve_volume(volume, sweeps: int = 2, levels: int | None = None, say=None) -
             "dimension": 3, "source": volume.source, "tetrahedra": int(cells.shape[0]),
             "vertices": int(x.shape[0]), "mesh_size": volume.mesh_size,
             "ranks": comm.size, "notes": list(volume.notes),
+            "boundary_vertices": dict(zip(("aligned", "sharp"), volume.num_boundary_vertices,
+                                          strict=True)),
             "mbo": {"levels": len(changes), "sweeps": sweeps, "last_change": changes[-1]
                     if changes else None, "seconds": solved - start},
             "singular_graph": {
