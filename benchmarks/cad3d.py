@@ -25,7 +25,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from _common import ROOT
 
 DEFAULT_PART = ROOT / "benchmarks" / "shapes3d" / "gmsh_part.step"
