@@ -820,6 +820,7 @@ class _Solve:
                 f"SJ min {found['min_sj']:.3f} mean {found['mean_sj']:.3f}, mean edge "
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
                 + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
+            say("  " + stages.quantisation_line(found))
 
     def _stage_failed(self, key: str, stage: str, error: BaseException) -> None:
         """Record that ``stage`` (summary key ``key``) failed with ``error``, and warn: the

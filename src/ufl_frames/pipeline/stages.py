@@ -326,6 +326,17 @@ def _one_line(e: BaseException) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
 
+def quantisation_line(quality: dict) -> str:
+    """One line saying which path made the quads of :func:`quadrangulate`'s measures
+    ``quality``: the T-mesh layout (its patches, arcs and collapsed arcs) or greedy
+    rounding, with why the layout was not kept."""
+    if quality.get("quantisation") == "layout":
+        return (f"made by the T-mesh layout ({quality['patches']} patches, "
+                f"{quality['arcs']} arcs, {quality['collapsed_arcs']} collapsed)")
+    why = quality.get("fallback_reason")
+    return "made by greedy rounding" + ("" if why is None else f" ({why})")
+
+
 def _by_layout(mesh, seamless_map):
     """layout: the quads of the T-mesh's patches, with integer arc lengths."""
     from ufl_frames.quads import patches

@@ -197,6 +197,20 @@ class _Points:
                 out.update(ids)
         return out
 
+    def curve_ids(self) -> set:
+        """The points on the features' interior curves (their arcs' points and ends)."""
+        out = set()
+        for arc, ids in zip(self.lay.arcs, self.arc_ids, strict=True):
+            if arc.curve:
+                out.update(ids)
+        return out
+
+    def model_ids(self) -> set:
+        """The nodes at the features' model points."""
+        mc = self.lay.motorcycles
+        return {i for i, key in enumerate(self.lay.nodes)
+                if key[0] == "v" and key[1] in mc.model_nodes}
+
     def bad_merges(self) -> list:
         """The zero arcs of the glues that put on one point two singular vertices inside,
         singular vertices and the boundary where the fan left is not valid
@@ -223,6 +237,21 @@ class _Points:
             pieces.setdefault(self.find(i), set()).add(find(i))
             members.setdefault(self.find(i), []).append(i)
         bad = {root for root, parts in pieces.items() if len(parts) > 1}
+        # an interior curve keeps its points apart: a glue may pull a trace, or a
+        # valence-5 singular vertex (turn −1: quads of 90° and 60° on the two sides), onto
+        # it (the curve's point stays, :func:`patch_quads`), not two of its points
+        # together, nor one onto the boundary or a valence-3 singular vertex (a quad with a
+        # 180° corner on one side)
+        special: dict = {}
+        for i in self.curve_ids() | self.model_ids():
+            special.setdefault(self.find(i), set()).add(i)
+        others = self.boundary_ids() | {i for i, key in enumerate(self.lay.nodes)
+                                        if key[0] == "v" and mc.singular.get(key[1], -1) != -1}
+        for i in others:
+            ids = special.get(self.find(i))
+            if ids is not None and i not in ids:
+                bad.add(self.find(i))
+        bad.update(root for root, ids in special.items() if len(ids) > 1)
         for runs in self.runs:  # a patch left with quads whose two corners are one point
             if len(runs[0]) > 1 and len(runs[1]) > 1:
                 for ids in runs:
@@ -472,18 +501,20 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
                           "quad size")
     quads = np.concatenate(quads)
     # glued points: one point each, a corner's, else the boundary's (a singular vertex
-    # glued to the boundary goes there), else the singular vertex's, else the mean
+    # glued to the boundary goes there), else an interior curve's or model point's (a
+    # trace glued to an interface goes onto it), else the singular vertex's, else the mean
     total = len(position)
     root = np.array([pts.find(i) if i < pts.count else i for i in range(total)])
-    rank = np.full(total, 3)
-    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 2
+    rank = np.full(total, 4)
+    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 3
+    rank[list(pts.curve_ids() | pts.model_ids())] = 2
     rank[list(pts.boundary_ids())] = 1
     rank[[i for i, key in enumerate(lay.nodes)
           if key[0] == "v" and mc.on_boundary[key[1]] and mc.quarters(key[1]) != 2]] = 0
     xy = np.array([np.asarray(p, dtype=float) for p in position])
     used, quads = np.unique(root[quads], return_inverse=True)
     quads = quads.reshape(-1, 4)
-    best = np.full(total, 4)
+    best = np.full(total, 5)
     np.minimum.at(best, root, rank)
     chosen = rank == best[root]
     sums = np.zeros((total, 2))
