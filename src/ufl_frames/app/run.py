@@ -436,7 +436,7 @@ def _cell_measures(domain) -> tuple:
 
     mesh = domain.mesh
     owned = mesh.topology.index_map(mesh.topology.dim).size_local
-    corners = mesh.geometry.x[mesh.geometry.dofmap[:owned]][:, :, :2]  # (m, 3, 2)
+    corners = mesh.geometry.x[mesh.geometry.dofmaps[0][:owned]][:, :, :2]  # (m, 3, 2)
     edges = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).mean(axis=1)
     a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     areas = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
