@@ -13,6 +13,7 @@ from ufl_frames.mesh.sizes import (
     SizeTarget,
     parse_size_expression,
     quad_count_factor,
+    resolving_factor,
 )
 
 
@@ -91,6 +92,31 @@ def test_quad_count_factor():
                                                                   rel=1e-4)
     with pytest.raises(ValueError):
         quad_count_factor(np.ones(n), areas, 0)
+
+
+def test_resolving_factor():
+    """Triangles of edge e = 0.01 (4·10⁴ of area 2.5·10⁻⁵: the unit square) under a
+    uniform h: N quads have edge 1/√N. 400 quads (edge 0.05) span 5 triangle edges: no
+    refinement; 10⁴ quads (edge 0.01) span one: the triangles must shrink by 1/3 to span
+    three. A target graded like the triangles (h ∝ e) gives the same factor everywhere;
+    a few cells (under 5 %) coarser than the rest do not decide it."""
+    m = 40_000
+    edges, areas = np.full(m, 0.01), np.full(m, 1.0 / m)
+    assert resolving_factor(np.ones(m), edges, areas, 400, per_edge=3) == 1.0
+    assert resolving_factor(np.ones(m), edges, areas, 10_000, per_edge=3) == \
+        pytest.approx(1 / 3)
+    rng = np.random.default_rng(1)
+    h = np.exp(rng.uniform(-3, 0, m))  # a decade and more of sizes, triangles graded alike
+    graded = 0.01 * h / h.mean()
+    c = quad_count_factor(h, areas, 10_000)
+    assert resolving_factor(h, graded, areas, 10_000, per_edge=2) == \
+        pytest.approx(min(1.0, c * h.mean() / 0.01 / 2))
+    coarse = edges.copy()
+    coarse[: m // 50] = 0.1  # 2 % of the cells ten times coarser
+    assert resolving_factor(np.ones(m), coarse, areas, 10_000, per_edge=3) == \
+        pytest.approx(1 / 3)
+    with pytest.raises(ValueError):
+        resolving_factor(np.ones(m), edges, areas, 400, per_edge=0)
 
 
 GRADED = """

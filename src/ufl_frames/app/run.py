@@ -14,7 +14,7 @@ import os
 import re
 import sys
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from ufl_frames import __version__, interrupts
@@ -417,11 +417,66 @@ def _saved_checkpoint(config: RunConfig, out: Path, record: dict, comm) -> dict 
 # --- the run ---------------------------------------------------------------------------------
 
 
-def _mesh(config: RunConfig, comm, say) -> list:
+def _quads_asked(config: RunConfig, domain, comm) -> float | None:
+    """The number of quads a run asks for: ``quad_count``, or the domain's area over the
+    squared ``quad_size``; None where it asks for neither (or no quads)."""
+    from mpi4py import MPI
+
+    if not config.quads or (config.quad_count is None and config.quad_size is None):
+        return None
+    if config.quad_count is not None:
+        return float(config.quad_count)
+    _, _, areas = _cell_measures(domain)
+    return comm.allreduce(float(areas.sum()), op=MPI.SUM) / config.quad_size**2
+
+
+def _cell_measures(domain) -> tuple:
+    """The owned cells' centroids (m, 2), mean edge lengths (m,) and areas (m,)."""
+    import numpy as np
+
+    mesh = domain.mesh
+    owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    corners = mesh.geometry.x[mesh.geometry.dofmaps[0][:owned]][:, :, :2]  # (m, 3, 2)
+    edges = np.linalg.norm(np.roll(corners, -1, axis=1) - corners, axis=2).mean(axis=1)
+    a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    areas = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    return corners.mean(axis=1), edges, areas
+
+
+def _resolving_factor(config: RunConfig, target, domain, comm) -> float:
+    """The factor (≤ 1) by which the triangles must shrink to resolve the quads of a
+    non-uniform size target (:func:`ufl_frames.mesh.sizes.resolving_factor`); 1 for a
+    uniform target, no target, or quads of no given count or size (collective)."""
+    import numpy as np
+
+    from ufl_frames.mesh.sizes import resolving_factor
+
+    if target is None or target.is_uniform or str(config.geometry).lower().endswith(".msh"):
+        return 1.0  # (a .msh file cannot be meshed again)
+    quads = _quads_asked(config, domain, comm)
+    if quads is None:
+        return 1.0
+    centroids, edges, areas = _cell_measures(domain)
+    h = target(centroids) if len(centroids) else np.zeros(0)
+    gathered = comm.gather((h, edges, areas), root=0)
+    factor = None
+    if comm.rank == 0:
+        h, edges, areas = (np.concatenate(a) for a in zip(*gathered))
+        factor = resolving_factor(h, edges, areas, quads)
+    return comm.bcast(factor, root=0)
+
+
+def _mesh(config: RunConfig, comm, say) -> tuple[list, object]:
     """The meshes of the run, coarsest first (:func:`ufl_frames.mesh.hierarchy.nested_domains`
-    of the mesh at the size asked for; one for ``conformal`` with 'auto' levels)."""
+    of the mesh at the size asked for; one for ``conformal`` with 'auto' levels), and the
+    run's size target (:func:`size_target`, read once the geometry meshes).
+
+    With a non-uniform size target and a number (or size) of quads asked for, a mesh
+    whose triangles are too coarse for those quads is made again at a smaller size factor
+    (:func:`_resolving_factor`; a note says so)."""
     from ufl_frames import mesh as geometry_module
     from ufl_frames.mesh.hierarchy import nested_domains
+    from ufl_frames.mesh.sizes import TRIANGLES_PER_QUAD_EDGE
 
     size = ("relative to the shape" if config.mesh_size is None
             else f"mesh size {config.mesh_size:g}")
@@ -429,9 +484,23 @@ def _mesh(config: RunConfig, comm, say) -> list:
     limit = {} if config.max_triangles is None else {"max_triangles": config.max_triangles}
     limit["time_limit"] = config.mesh_time_limit
     interrupts.set_stage("meshing")
+    size_factor = config.size_factor
     try:
         domain = geometry_module.build(comm, config.geometry, config.mesh_size,
-                                       config.size_factor, **limit)
+                                       size_factor, **limit)
+        target = size_target(config, comm)
+        _check_size_target(target, domain, comm)
+        factor = _resolving_factor(config, target, domain, comm)
+        if factor < 1.0:
+            size_factor *= factor
+            say(f"  {domain.num_cells} triangles are too coarse for the quads of the size "
+                f"target: meshing again at size factor {size_factor:.3g} ...")
+            domain = geometry_module.build(comm, config.geometry, config.mesh_size,
+                                           size_factor, **limit)
+            note = (f"triangles at size factor {size_factor:.3g} (not {config.size_factor:g})"
+                    f" so that each quad edge spans at least {TRIANGLES_PER_QUAD_EDGE:g} "
+                    "triangle edges")
+            domain = replace(domain, notes=(*domain.notes, note))
     except geometry_module.MeshTimeLimit as e:  # raised identically on every rank
         raise InputError(f"{e}; a larger --mesh-time-limit allows more") from e
     except geometry_module.GeometryError as e:  # raised identically on every rank
@@ -439,8 +508,8 @@ def _mesh(config: RunConfig, comm, say) -> list:
     levels = 1 if config.conformal and config.levels == "auto" else config.levels
     try:
         return nested_domains(comm, config.geometry, domain, levels, config.mesh_size,
-                              config.size_factor, nested_meshes=config.nested_meshes,
-                              say=say, **limit)
+                              size_factor, nested_meshes=config.nested_meshes,
+                              say=say, **limit), target
     except geometry_module.GeometryError as e:  # raised identically on every rank
         raise InputError(str(e)) from e
 
@@ -488,7 +557,7 @@ def run(config: RunConfig, comm=None) -> dict:
     record = run_record(config, comm, petsc_options)
     saved = _saved_checkpoint(config, out, record, comm)
     check_output_folder(out, config.force, comm, resuming=config.resume is not None)
-    domains = _mesh(config, comm, say)
+    domains, target = _mesh(config, comm, say)
     domain = domains[-1]
     _check_sizes(config, domain, comm)
     interrupts.set_stage("the MBO initial field")
@@ -504,7 +573,7 @@ def run(config: RunConfig, comm=None) -> dict:
     store = checkpoints.CheckpointFolder(out, comm, record, key, existing=saved is not None)
     interrupts.note_checkpoint(out if saved is not None else None)
     try:
-        solve = _Solve(config, comm, say, out, store, saved)
+        solve = _Solve(config, comm, say, out, store, saved, target)
         solve.solve(domains)
         solve.report()
         solve.stages()
@@ -560,7 +629,9 @@ def size_target(config: RunConfig, comm):
 
 def _check_size_target(target, domain, comm) -> None:
     """Raise :class:`InputError` on every rank where ``target`` is not finite and positive
-    at a vertex of ``domain`` on some rank (collective)."""
+    at a vertex of ``domain`` on some rank (collective; nothing to check for None)."""
+    if target is None:
+        return
     problem = None
     try:
         target(domain.mesh.geometry.x[:, :2])
@@ -592,7 +663,8 @@ class _Solve:
     resumed from (None without ``--resume``).
     """
 
-    def __init__(self, config: RunConfig, comm, say, out: Path, store, saved: dict | None):
+    def __init__(self, config: RunConfig, comm, say, out: Path, store, saved: dict | None,
+                 target=None):
         self.config, self.comm, self.say, self.out = config, comm, say, out
         self.store, self.saved = store, saved
         self.field = None
@@ -601,7 +673,7 @@ class _Solve:
         self.tao_type = None
         self.max_it = config.max_it  # -tao_max_it wins
         self.param = self.quads = None  # the stages' records
-        self.size_target = None  # the solve's SizeTarget (None: H alone)
+        self.size_target = target  # the solve's SizeTarget (None: H alone)
         self.missing: dict[str, str] = {}  # what was asked for and is not written: why
         self.skipped: list[tuple[str, str]] = []  # figures that could not be drawn
         self._finest_space = None
@@ -681,7 +753,6 @@ class _Solve:
         from ufl_frames.pipeline import FrameField
 
         config = self.config
-        self.size_target = size_target(config, self.comm)
         if self.size_target is not None:
             _check_size_target(self.size_target, domains[-1], self.comm)
             self.say(f"size target: {self.size_target.describe()} "

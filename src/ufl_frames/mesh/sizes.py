@@ -29,13 +29,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS", "SizeExpressionError",
-           "SizeTarget", "file_size_samples", "parse_size_expression", "quad_count_factor",
-           "read_file_sizes"]
+__all__ = ["DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS", "TRIANGLES_PER_QUAD_EDGE",
+           "SizeExpressionError", "SizeTarget", "file_size_samples", "parse_size_expression",
+           "quad_count_factor", "read_file_sizes", "resolving_factor"]
 
 #: w of the sized energy H + w H_s M (see :func:`ufl_frames.fem.energy.size_misfit_form`):
 #: dimensionless, measured in ``docs/note-checks.md`` ("The sized problem").
 DEFAULT_SIZE_WEIGHT = 0.3
+
+#: Triangle edges a quad edge of a sized mesh spans at least (see :func:`resolving_factor`).
+#: Measured on ``benchmarks/shapes/l_shape_graded.geo`` at 400 quads: about one (the
+#: file's own sizes) folds the map at the re-entrant corner; about two (size factors 0.5
+#: and 0.48) once gave valid quads and once ± pairs of singularities a triangle from the
+#: corner that fold it again; three (0.32, and 0.3 by hand) gave valid quads.
+TRIANGLES_PER_QUAD_EDGE = 3.0
+#: The share of the cells allowed to be coarser than that (a few cells where Gmsh's sizes
+#: lag the target, e.g. next to a point size, should not refine the whole mesh).
+_UNRESOLVED_SHARE = 0.05
 
 #: The functions a size expression may call (the NumPy functions of the same name).
 FUNCTIONS = {
@@ -286,6 +296,35 @@ def quad_count_factor(h: np.ndarray, areas: np.ndarray, quads: float) -> float:
         raise ValueError(f"the number of quads must be > 0, got {quads}")
     h, areas = np.asarray(h, dtype=np.float64), np.asarray(areas, dtype=np.float64)
     return float(np.sqrt(np.dot(areas, 1.0 / h**2) / quads))
+
+
+def resolving_factor(h: np.ndarray, edges: np.ndarray, areas: np.ndarray, quads: float,
+                     per_edge: float = TRIANGLES_PER_QUAD_EDGE) -> float:
+    """The factor f ≤ 1 by which the triangles' sizes must shrink so that the quads of the
+    target, c·h with c = :func:`quad_count_factor` (``quads`` of them), span at least
+    ``per_edge`` triangle edges each, but on a share of :data:`_UNRESOLVED_SHARE` of the
+    cells: f = min(1, q₅(c h / e) / per_edge), q₅ the 5th percentile over the cells.
+
+    A parametrisation made on triangles as large as its quads cannot place their corners
+    (the integer-grid map folds); the file's own sizes are the quads' sizes up to c, so a
+    file graded towards a point gets about one triangle per quad edge there whatever N is.
+
+    Args:
+        h: the target at the cells' centroids, (m,).
+        edges: the cells' mean edge lengths, (m,).
+        areas: the cells' areas, (m,).
+        quads: the number of quads asked for.
+        per_edge: triangle edges per quad edge asked for (> 0).
+
+    Returns:
+        f in (0, 1]: 1 where the triangles resolve the quads already.
+    """
+    if not per_edge > 0:
+        raise ValueError(f"per_edge must be > 0, got {per_edge}")
+    h, edges = np.asarray(h, dtype=np.float64), np.asarray(edges, dtype=np.float64)
+    c = quad_count_factor(h, areas, quads)
+    ratio = c * h / edges
+    return float(min(1.0, np.percentile(ratio, 100 * _UNRESOLVED_SHARE) / per_edge))
 
 
 def file_size_samples() -> np.ndarray | None:
