@@ -105,22 +105,21 @@ def singular_graph(cells: np.ndarray, q: np.ndarray, x: np.ndarray | None = None
     flip = a > b  # (b, a, d, c) is as positive as (a, b, c, d)
     a, b = np.where(flip, b, a), np.where(flip, a, b)
     c, d = np.where(flip, d, c), np.where(flip, c, d)
-    edge_key = a * n + b
     # the next incidence around the edge: the one of the same edge whose c is this d (the
-    # 6m-long arrays are dropped as soon as they are used: at 10⁶ tetrahedra each is 48 MB)
+    # 6m-long arrays are dropped as soon as they are used: at 10⁶ tetrahedra each is 48 MB;
+    # keys edge number · n + vertex stay below 6m·n, far from int64's end)
+    edges, first, edge_id = np.unique(a * n + b, return_index=True, return_inverse=True)
     del a, b, flip
-    key_c = edge_key * n + c
+    key_c = edge_id * n + c
     del c
     order = np.argsort(key_c)
     sorted_c = key_c[order]
     del key_c
-    wanted = edge_key * n + d
-    del d
+    wanted = edge_id * n + d
+    del d, edge_id
     pos = np.minimum(np.searchsorted(sorted_c, wanted), order.size - 1)
     nxt = np.where(sorted_c[pos] == wanted, order[pos], -1)
     del sorted_c, wanted, pos, order
-    edges, first = np.unique(edge_key, return_index=True)
-    del edge_key
     match = np.full(nxt.size, -1, dtype=np.int64)
     ok = np.flatnonzero(nxt >= 0)
     match[ok] = _matchings(R, ok // 6, nxt[ok] // 6)  # incidence k is in tetrahedron k // 6
