@@ -152,7 +152,8 @@ def test_projection_of_perturbed_frames_is_the_closest_point(lengths, eps):
     r = q + d - p
     # the iteration stops after a step under 1e-8 rad; at a residual of size ε its linear
     # rate leaves a tangential residual of order 1e-8 · ε · (curvature), not of order ε
-    assert np.abs(np.einsum("nka,nk->na", T, r)).max() < 1e-6 * eps
+    # (small steps are taken without comparing distances, which are flat to rounding there)
+    assert np.abs(np.einsum("nka,nk->na", T, r)).max() < 1e-7 * eps
     assert np.abs(odeco.project(p) - p).max() < 1e-12
 
 

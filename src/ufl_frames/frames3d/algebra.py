@@ -57,8 +57,7 @@ class FrameAlgebra3D:
     def closest_unit_aligned(self, q, normals) -> np.ndarray:
         """The isotropic unit frames with one axis along ``normals`` (N, 3), closest in
         orientation to q (N, 15)."""
-        p = odeco.project_aligned(q, normals, isotropic=True)
-        return self.unit_frames(odeco.q_to_frames(p)[1])
+        return self.unit_frames(odeco.aligned_frames(q, normals, isotropic=True)[1])
 
     def variety_residual(self, q) -> np.ndarray:
         """The 27 variety equations at q (N, 27)."""

@@ -66,7 +66,10 @@ class SingularGraph:
 def cell_rotations(cells: np.ndarray, q: np.ndarray) -> np.ndarray:
     """The frame rotation (m, 3, 3) of each tetrahedron: of the frame closest to the mean
     of its vertices' coefficients."""
-    return odeco.q_to_frames(q[cells].mean(axis=1))[1]
+    mean = q[cells[:, 0]]  # summed vertex by vertex: q[cells] would hold (m, 4, 15)
+    for k in range(1, cells.shape[1]):
+        mean += q[cells[:, k]]
+    return odeco.q_to_frames(mean / cells.shape[1])[1]
 
 
 def singular_graph(cells: np.ndarray, q: np.ndarray, x: np.ndarray | None = None) -> SingularGraph:
@@ -102,19 +105,25 @@ def singular_graph(cells: np.ndarray, q: np.ndarray, x: np.ndarray | None = None
     flip = a > b  # (b, a, d, c) is as positive as (a, b, c, d)
     a, b = np.where(flip, b, a), np.where(flip, a, b)
     c, d = np.where(flip, d, c), np.where(flip, c, d)
-    tet = np.repeat(np.arange(m), 6)
-    edge_key = a * n + b
-    # the next incidence around the edge: the one of the same edge whose c is this d
-    key_c = edge_key * n + c
+    # the next incidence around the edge: the one of the same edge whose c is this d (the
+    # 6m-long arrays are dropped as soon as they are used: at 10⁶ tetrahedra each is 48 MB;
+    # keys edge number · n + vertex stay below 6m·n, far from int64's end)
+    edges, first, edge_id = np.unique(a * n + b, return_index=True, return_inverse=True)
+    del a, b, flip
+    key_c = edge_id * n + c
+    del c
     order = np.argsort(key_c)
     sorted_c = key_c[order]
-    wanted = edge_key * n + d
+    del key_c
+    wanted = edge_id * n + d
+    del d, edge_id
     pos = np.minimum(np.searchsorted(sorted_c, wanted), order.size - 1)
     nxt = np.where(sorted_c[pos] == wanted, order[pos], -1)
-    edges, first = np.unique(edge_key, return_index=True)
+    del sorted_c, wanted, pos, order
     match = np.full(nxt.size, -1, dtype=np.int64)
-    ok = nxt >= 0
-    match[ok] = closest_symmetry(np.einsum("nji,njk->nik", R[tet[ok]], R[tet[nxt[ok]]]))
+    ok = np.flatnonzero(nxt >= 0)
+    match[ok] = _matchings(R, ok // 6, nxt[ok] // 6)  # incidence k is in tetrahedron k // 6
+    del ok
     G = np.zeros(first.size, dtype=np.int64)  # the identity
     cur = first.copy()
     closed = np.zeros(first.size, dtype=bool)
@@ -138,6 +147,21 @@ def singular_graph(cells: np.ndarray, q: np.ndarray, x: np.ndarray | None = None
     open_ends = np.flatnonzero((degree == 1) & ~on_boundary)
     return SingularGraph(edges=pairs, turn=turns, chains=chains, open_ends=open_ends,
                          boundary_edges=int(np.count_nonzero(~closed)))
+
+
+#: Incidences matched per chunk: the relative rotations and their 24 scores are built a
+#: chunk at a time (at 10⁶ tetrahedra, 6·10⁶ at once took about 1.7 GB).
+_CHUNK = 1 << 17
+
+
+def _matchings(R: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Index (k,) into :data:`OCTAHEDRAL` of the element closest to R_iᵀ R_j for each pair
+    of tetrahedra (i, j) (k,), chunk by chunk."""
+    out = np.empty(i.size, dtype=np.int64)
+    for start in range(0, i.size, _CHUNK):
+        rows = slice(start, start + _CHUNK)
+        out[rows] = closest_symmetry(np.einsum("nji,njk->nik", R[i[rows]], R[j[rows]]))
+    return out
 
 
 def orient(cells: np.ndarray, x: np.ndarray) -> np.ndarray:
