@@ -27,9 +27,9 @@ reported as ``timeout`` with the stages it finished.
 
 Nested runs also get a table of every level's triangles, Newton steps and
 singularities, with the share of vertices near the aspect bound and rank 0's CPU
-seconds of the solve. ``--json`` keeps the records; ``--from-json`` reports on such files again, several runs
-together (a serial series and a 2-rank one, say), and ``--figure`` plots the seconds and
-the finest level's Newton steps against the triangles.
+seconds of the solve. ``--json`` keeps the records; ``--from-json`` reports on such
+files again, several runs together (a serial series and a 2-rank one, say), and
+``--figure`` plots the seconds and the finest level's Newton steps against the triangles.
 
 Unknown single-dash arguments (``-tao_nls_pc_type hypre``) reach every run's PETSc options.
 The solves use the ``ufl_frames`` that the interpreter imports (``PYTHONPATH=OTHER/src``
