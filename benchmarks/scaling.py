@@ -25,9 +25,11 @@ time per triangle; and the issue's targets for the non-isotropic piano, each mar
 ``holds`` / ``fails`` / ``not measured``. A run past ``--timeout`` seconds is killed and
 reported as ``timeout`` with the stages it finished.
 
-``--json`` keeps the records; ``--from-json`` reports on such files again, several runs
-together (a serial series and a 2-rank one, say), and ``--figure`` plots the seconds and
-the finest level's Newton steps against the triangles.
+Nested runs also get a table of every level's triangles, Newton steps and
+singularities, with the share of vertices near the aspect bound and rank 0's CPU
+seconds of the solve. ``--json`` keeps the records; ``--from-json`` reports on such
+files again, several runs together (a serial series and a 2-rank one, say), and
+``--figure`` plots the seconds and the finest level's Newton steps against the triangles.
 
 Unknown single-dash arguments (``-tao_nls_pc_type hypre``) reach every run's PETSc options.
 The solves use the ``ufl_frames`` that the interpreter imports (``PYTHONPATH=OTHER/src``
@@ -206,6 +208,26 @@ def print_quad_table(records) -> None:
               f"| {sec['integrate']:.2f} | {sec['quantise']:.2f} | {r['stages']['quads']:.2f} "
               f"| {1e6 * r['stages']['quads'] / r['triangles']:.0f} "
               f"| {q['irregular_vertices']} | {q['min_sj']:.3f} | {q['valid']} |")
+
+
+def print_levels_table(records) -> None:
+    """Per nested run: every level's triangles, Newton steps and singularities, the
+    share of vertices within 10 % of the aspect bound and rank 0's CPU seconds of the
+    solve (steady where the wall seconds are not, on a shared machine)."""
+    from _common import table_rule
+
+    head = ("\n| case | ranks | levels: triangles / Newton steps / singularities "
+            "| near bound | solve CPU s (rank 0) |")
+    print(head)
+    print(table_rule(head))
+    for r in records:
+        if r["status"] != "ok" or not r.get("levels"):
+            continue
+        levels = "; ".join(f"{e['triangles']} / {e['iterations']} / {len(e['singularities'])}"
+                           for e in r["levels"])
+        near = "-" if r.get("near_bound") is None else f"{100 * r['near_bound']:.1f} %"
+        print(f"| {r['case']} | {r['ranks']} | {levels} | {near} "
+              f"| {r['cpu_rank0']['solve']:.1f} |")
 
 
 def _indices(values) -> str:
@@ -403,6 +425,8 @@ def main(argv=None) -> int:
 def report(records: list[dict], args) -> None:
     """The tables, the growth per refinement, the targets and ``--figure``."""
     print_table(records)
+    if any(r.get("levels") for r in records if r["status"] == "ok"):
+        print_levels_table(records)
     if any(r.get("quads") for r in records):
         print_quad_table(records)
     print()

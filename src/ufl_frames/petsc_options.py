@@ -37,7 +37,8 @@ _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hes
                        "tao_gttol")
 _REALS = ("tao_fmin",)
 #: Switches (``-name`` alone means true) and the values PETSc reads as one.
-_BOOLS = ("frames_gn_adapt", "frames_gn_adapt_bound", "frames_active_consistent")
+_BOOLS = ("frames_gn_adapt", "frames_gn_adapt_bound", "frames_active_consistent",
+          "frames_hessian_safeguard")
 _BOOL_VALUES = ("true", "false", "yes", "no", "on", "off", "1", "0")
 
 

@@ -81,8 +81,21 @@ class ReducedFactorPC:
         T, R = self.model.reduced_operator()
         self.ksp.setOperators(R)
         self.ksp.setUp()
+        if self.model.safeguarded and self.negative_pivots() \
+                and self.model.gauss_newton_step():
+            T, R = self.model.reduced_operator()
+            self.ksp.setOperators(R)
+            self.ksp.setUp()
         if self.work is None:
             self.work = (R.createVecRight(), R.createVecRight(), T.createVecLeft())
+
+    def negative_pivots(self) -> int:
+        """The negative pivots of the last factorisation of R (MUMPS' INFOG(12), over all
+        ranks); 0 where the factorisation is not MUMPS' (no inertia to read)."""
+        pc = self.ksp.getPC()
+        if pc.getType() != PETSc.PC.Type.CHOLESKY or pc.getFactorSolverType() != "mumps":
+            return 0
+        return int(pc.getFactorMatrix().getMumpsInfog(12))
 
     def apply(self, pc, r, y):
         """y = T R⁻¹ Tᵀ r + (r − T Tᵀ r) / (μ − σ + s): the pre-matrix's inverse applied.

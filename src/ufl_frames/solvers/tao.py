@@ -37,7 +37,9 @@ on round-off. TAO types:
   the model of :class:`GaussNewtonModel` — the exact Riemannian Hessian for isotropic
   frames; for non-isotropic ones Gauss–Newton, then the exact Hessian once the gradient
   is below τ = 1e-3 of its start (``-frames_hessian hybrid|exact|gauss_newton``,
-  ``-frames_hessian_switch τ``); the Newton systems
+  ``-frames_hessian_switch τ``; with a size target τ = 3e-2, and an exact step whose
+  factorisation is indefinite taken with Gauss–Newton, ``-frames_hessian_safeguard``);
+  the Newton systems
   are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``: by default a
   sparse Cholesky factorisation in reduced tangent coordinates, 3 unknowns per vertex,
   see :func:`newton_pc_options`); the Gauss–Newton
@@ -72,6 +74,7 @@ from ufl_frames.solvers.active_set import CONSISTENT_ROUNDS, RELEASE_RATIO  # no
 from ufl_frames.solvers.hessian import (  # noqa: E402
     DEFAULT_DAMPING,
     HYBRID_SWITCH,
+    SIZED_SWITCH,
     GaussNewtonModel,
 )
 from ufl_frames.solvers.reduced_pc import ReducedFactorPC  # noqa: E402
@@ -565,8 +568,10 @@ class _TaoSolve:
             rounds=opts.getInt("frames_active_rounds", CONSISTENT_ROUNDS),
             bound_steps=opts.getBool("frames_gn_adapt_bound", True),
             exact=hessian == "exact", lean=lean,
-            switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH)
-                    if hessian == "hybrid" else None)))
+            switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH
+                                 if self.problem.size is None else SIZED_SWITCH)
+                    if hessian == "hybrid" else None),
+            safeguard=opts.getBool("frames_hessian_safeguard", True)))
         if resume is not None and resume.adaptation is not None:
             model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
                          resume.step, exact=resume.exact_hessian,
