@@ -201,9 +201,9 @@ def curve_lengths(points, curve_edges, edge_curve) -> dict:
 def feature_problems(quad_mesh, x, cells, features: Features) -> list[str]:
     """What breaks the features on the quads of :func:`quad_features`, one line each (an
     empty list where nothing does): a model point (but a smooth joint,
-    :attr:`~ufl_frames.param.features.Features.required_points`) with no quad vertex; a quad outside the
-    mesh or with a corner outside its region's triangles (straddling an interface); a
-    region whose quads' area, or a curve whose quad edges' length, differs from the
+    :attr:`~ufl_frames.param.features.Features.required_points`) with no quad vertex; a
+    quad outside the mesh or with a corner outside its region's triangles (straddling an
+    interface); a region whose quads' area, or a curve whose quad edges' length, differs from the
     triangles' by more than :data:`RTOL` plus what the quad edges' chords of the curved
     parts explain (:func:`chord_allowances`); curves joined by smooth joints count as one
     (:meth:`~ufl_frames.param.features.Features.curve_chains`)."""
