@@ -140,6 +140,35 @@ def test_param_adds_the_map(shared_tmp):
     assert 0 < found["misfit"] < 0.2
 
 
+COARSE_SQUARE = """// a unit square whose own point sizes (0.5) are coarser than the quads asked for
+Point(1) = {0, 0, 0, 0.5}; Point(2) = {1, 0, 0, 0.5};
+Point(3) = {1, 1, 0, 0.5}; Point(4) = {0, 1, 0, 0.5};
+Line(1) = {1, 2}; Line(2) = {2, 3}; Line(3) = {3, 4}; Line(4) = {4, 1};
+Curve Loop(1) = {1, 2, 3, 4}; Plane Surface(1) = {1};
+"""
+
+
+def test_quads_size_the_triangles(shared_tmp, capsys):
+    """--quads --quad-size S without --mesh-size: the triangles are no larger than S (the
+    file's own size, 0.5, is five times the quads'), the log says so, and the quads are
+    the square's 10 × 10 grid; an explicit --mesh-size is kept."""
+    geo = shared_tmp / "coarse_square.geo"
+    if COMM.rank == 0:
+        geo.write_text(COARSE_SQUARE)
+    COMM.Barrier()
+    summary = run(RunConfig(str(geo), conformal=True, quads=True, quad_size=0.1,
+                            out=shared_tmp / "sq"), comm=COMM)
+    lines = capsys.readouterr().out
+    if COMM.rank == 0:
+        assert "mesh size 0.1: the quad size" in lines
+    assert summary["requested_mesh_size"] == 0.1 and summary["mesh_size"] <= 0.1
+    found = summary["quads"]
+    assert found["valid"] and found["quads"] == 100 and found["irregular_vertices"] == 0
+    kept = run(RunConfig(str(geo), conformal=True, quads=True, quad_size=0.1, mesh_size=0.08,
+                         out=shared_tmp / "sq2", quiet=True), comm=COMM)
+    assert kept["requested_mesh_size"] == 0.08
+
+
 def test_progress_lines(shared_tmp, capsys):
     run(RunConfig("annulus", mesh_size=0.2, max_it=3, out=shared_tmp / "o"), comm=COMM)
     lines = capsys.readouterr().out.splitlines()

@@ -93,11 +93,17 @@ def test_nodes_onto_the_circles_and_points(geo, named):
 
 def test_a_move_to_another_curve_is_refused(geo):
     x, q, edges, curves, point_nodes, point_tag = polar_quads()
+    outer_node = edges[0, 1]  # edge 0's first node is point 2's, placed on the point anyway
     wrong = curves.copy()
-    wrong[0] = 5  # an outer edge named as on the inner circle: its node would cross the ring
+    wrong[0] = 5  # an outer edge named as on the inner circle: its other edge is outer
     snap = snap_to_cad(str(geo), x, q, curve_edges=edges, edge_curve=wrong,
                        point_nodes=point_nodes, point_tag=point_tag, time_limit=60.0)
-    outer_node = edges[0, 1]  # its first node is point 2's, placed on the point anyway
+    assert snap.refused == 0  # a node named on two curves goes to the nearer one
+    assert np.linalg.norm(snap.points[outer_node]) == pytest.approx(1.0, abs=1e-9)
+    # named on the inner circle alone (both its edges): the move across the ring is refused
+    wrong[(edges == outer_node).any(axis=1)] = 5
+    snap = snap_to_cad(str(geo), x, q, curve_edges=edges, edge_curve=wrong,
+                       point_nodes=point_nodes, point_tag=point_tag, time_limit=60.0)
     assert snap.refused == 1
     assert np.array_equal(snap.points[outer_node], x[outer_node])
     assert snap.max_offset_after == pytest.approx(0.5, abs=2 * SAGITTA)

@@ -96,18 +96,18 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     n_theta = found["vertices"] - found["quads"]
     assert n_theta >= 8 and found["quads"] % n_theta == 0
     assert found["interior_valence"] == {"4": found["quads"] - n_theta}
-    # the refusal says which smaller sizes were tried (the annulus is 0.5 wide: at 2.0 no
-    # quad fits across; at 1.4 and 1.0 one layer of quads cannot also have the circles'
-    # model points as vertices)
+    # the refusal says which smaller size works (the annulus is 0.5 wide: at 2.0 and 1.4
+    # no quad fits across; at 1.0 one layer of quads does, the circles' model points being
+    # smooth joints that a quad edge may span)
     with pytest.raises(RunError, match=r"cannot make quads of this field: .*quad size"
-                       r".*\(quad sizes 1\.4, 1 fail too\)") as failed:
+                       r".*\(quad size 1 works\)") as failed:
         run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True, quads=True,
                       quad_size=2.0), comm=COMM)
     COMM.Barrier()
     # the field is not lost to the quads: written with the summary, which says why they lack
     written = json.loads((out / "b" / "summary.json").read_text())
     assert written == failed.value.summary
-    assert "(quad sizes 1.4, 1 fail too)" in written["missing"]["quads"]
+    assert "(quad size 1 works)" in written["missing"]["quads"]
     assert not any(name.startswith("quads") for name in written["files"])
     assert set(written["files"]) == {p.name for p in (out / "b").iterdir()}
 

@@ -24,7 +24,7 @@ from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT
 from ufl_frames.petsc_options import MAX_INT, petsc_option_problem
 
 __all__ = ["IncompleteRun", "RunConfig", "check_output_folder", "default_output_folder",
-           "estimated_quads", "run"]
+           "estimated_quads", "run", "sized_for_quads"]
 
 PROG = "ufl-frames"
 DEFAULT_MESH_SIZE = None  # relative to the shape: see ufl_frames.mesh.load
@@ -293,6 +293,24 @@ def _check_config(config: RunConfig, petsc_options: dict) -> None:
         raise InputError(problem)
 
 
+def sized_for_quads(config: RunConfig) -> tuple[RunConfig, bool]:
+    """``config`` with the triangles' size tied to the quads' where ``--quads --quad-size S``
+    is asked without ``--mesh-size``: mesh size S (the largest triangle edge, a file's
+    finer sizes kept; a built-in shape's only where S is under its default), as
+    ``ufl-frames mesh`` does, so that every quad covers a few
+    triangles (a map on triangles larger than the quads is too coarse to quantise: its
+    quads fold). Returns (the config, whether it was changed)."""
+    from ufl_frames.mesh.builtin import BUILTIN_MESH_SIZE, KNOWN_GEOMETRIES
+
+    if not (config.quads and config.quad_size is not None and config.mesh_size is None) \
+            or str(config.geometry).lower().endswith(".msh"):
+        return config, False
+    if config.geometry in KNOWN_GEOMETRIES:  # their default is known: never coarser
+        if config.quad_size >= BUILTIN_MESH_SIZE:
+            return config, False
+    return replace(config, mesh_size=config.quad_size), True
+
+
 def estimated_quads(area: float, quad_size: float) -> float:
     """Quads of mean edge ``quad_size`` that cover ``area``: ``area / quad_size²``."""
     return area / (quad_size * quad_size)
@@ -554,6 +572,10 @@ def run(config: RunConfig, comm=None) -> dict:
     petsc_options = PETSc.Options().getAll()
     out = _output_path(config)
     _check_config(config, petsc_options)
+    config, sized = sized_for_quads(config)
+    if sized:
+        say(f"mesh size {config.mesh_size:g}: the quad size (triangles no larger than the "
+            "quads, as 'ufl-frames mesh'; --mesh-size sets it apart)")
     record = run_record(config, comm, petsc_options)
     saved = _saved_checkpoint(config, out, record, comm)
     check_output_folder(out, config.force, comm, resuming=config.resume is not None)

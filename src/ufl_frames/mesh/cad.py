@@ -139,9 +139,11 @@ def _asked(x, q, curve_edges, edge_curve, point_nodes, point_tag) -> dict:
                                   dtype=np.int64).ravel(), 2)
     if nodes.shape != tags.shape or curves.size != edges.size:
         raise ValueError("point_nodes and point_tag, curve_edges and edge_curve must match")
-    on_curve, first = np.unique(edges.ravel(), return_index=True)
-    keep = ~np.isin(on_curve, nodes)
-    return {"points": (nodes, tags), "curves": (on_curve[keep], curves[first][keep]),
+    # every (node, curve) pair: a node on the edges of two curves (a quad edge spanning a
+    # smooth joint) goes to the nearer of them (:func:`_targets`)
+    pairs = np.unique(np.stack([edges.ravel(), curves], axis=1).reshape(-1, 2), axis=0)
+    keep = ~np.isin(pairs[:, 0], nodes)
+    return {"points": (nodes, tags), "curves": (pairs[keep, 0], pairs[keep, 1]),
             "longest": MAX_MOVE * edge}
 
 
@@ -209,7 +211,14 @@ def _targets(source: str, x: np.ndarray, asked: dict, plane=None):
         mine = curve_nodes[curve_tags == tag]
         nodes += mine.tolist()
         targets += list(_closest(tag, x[mine], plane))
-    return np.asarray(nodes, dtype=np.int64), np.asarray(targets, dtype=float).reshape(-1, 2)
+    nodes = np.asarray(nodes, dtype=np.int64)
+    targets = np.asarray(targets, dtype=float).reshape(-1, 2)
+    # a node asked onto several curves: the nearest target (model points come first)
+    gap = np.linalg.norm(targets - x[nodes], axis=1) if nodes.size else np.zeros(0)
+    gap[: len(point_nodes)] = -1.0
+    order = np.lexsort((gap, nodes))
+    first = np.unique(nodes[order], return_index=True)[1]
+    return nodes[order][first], targets[order][first]
 
 
 def _point(tag: int, plane=None) -> np.ndarray:

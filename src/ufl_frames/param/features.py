@@ -9,14 +9,16 @@ gathered arrays (:func:`ufl_frames.param.gather.gather_field`: input node order,
 numbers dropped).
 
 Interior curve edges (two triangles) are where the map's coordinate across the curve is
-constant and integer, as on the boundary; model points are quad vertices.
+constant and integer, as on the boundary; model points are quad vertices, except the
+smooth joints (:func:`with_smooth_joints`): a point where two boundary curves meet without
+a corner (a polyline's vertices, say), which a quad edge may span.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["Features"]
+__all__ = ["Features", "with_smooth_joints"]
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,8 @@ class Features:
         edge_curve: (k,) the curve tag of each.
         point_nodes: (p,) nodes at model points.
         point_tag: (p,) the point tag of each.
+        joints: the model points of ``point_nodes`` that need not be quad vertices
+            (:func:`with_smooth_joints`; none by default).
     """
 
     cell_region: np.ndarray
@@ -36,6 +40,31 @@ class Features:
     edge_curve: np.ndarray
     point_nodes: np.ndarray
     point_tag: np.ndarray
+    joints: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    @property
+    def required_points(self) -> np.ndarray:
+        """The model points that must be quad vertices: ``point_nodes`` but the joints."""
+        return np.asarray(self.point_nodes, dtype=np.int64)[
+            ~np.isin(self.point_nodes, self.joints)]
+
+    def curve_chains(self) -> dict:
+        """{curve tag: the smallest tag of the curves joined to it through joints}: the
+        curves a quad edge may run along as one."""
+        parent = {int(c): int(c) for c in np.unique(self.edge_curve)}
+
+        def root(c):
+            while parent[c] != c:
+                c = parent[c]
+            return c
+
+        e = np.asarray(self.curve_edges, dtype=np.int64).reshape(-1, 2)
+        for v in np.asarray(self.joints, dtype=np.int64):
+            tags = np.unique(self.edge_curve[(e == v).any(axis=1)])
+            for t in tags[1:]:
+                a, b = root(int(tags[0])), root(int(t))
+                parent[max(a, b)] = min(a, b)
+        return {c: root(c) for c in parent}
 
     @classmethod
     def none(cls, num_cells: int) -> "Features":
@@ -58,3 +87,56 @@ class Features:
         wanted = np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1])
         pos = np.minimum(np.searchsorted(unique, wanted), max(unique.size - 1, 0))
         return (unique.size > 0) & (unique[pos] == wanted) & (counts[pos] == 2)
+
+
+def with_smooth_joints(features: Features, x, cells, physical_groups=()) -> Features:
+    """``features`` with its smooth joints: the model points where exactly two boundary
+    curve edges meet, of two curves (or the two ends of one closed curve) in the same
+    physical curve groups, no interior curve ends, the point in no physical point group,
+    and the domain's angle there rounds to two quarter turns (between 135° and 225°: the
+    field takes the boundary as straight there, as it rounds corners). A quad edge may
+    span them: at a quad size larger than a polyline's segments, every vertex a quad
+    vertex would squeeze the quads there until they fold.
+
+    Args:
+        features: the features of the triangle mesh.
+        x: the mesh's nodes (n, 2+).
+        cells: its triangles (m, 3).
+        physical_groups: the file's :class:`~ufl_frames.mesh.domain.PhysicalGroup`
+            records (those of dimension 0 and 1 count).
+
+    Returns:
+        The features with ``joints`` set.
+    """
+    x = np.asarray(x, dtype=np.float64)[:, :2]
+    cells = np.asarray(cells, dtype=np.int64)
+    e = np.asarray(features.curve_edges, dtype=np.int64).reshape(-1, 2)
+    if e.size == 0 or len(features.point_nodes) == 0:
+        return features
+    named_points = {t for g in physical_groups if g.dim == 0 for t in g.entities}
+    groups_of = {}
+    for g in physical_groups:
+        if g.dim == 1:
+            for t in g.entities:
+                groups_of.setdefault(abs(int(t)), set()).add(g.tag)
+    boundary = ~features.interior_curve_edges(cells)
+    n = x.shape[0]
+    degree = np.bincount(e.ravel(), minlength=n)
+    boundary_degree = np.bincount(e[boundary].ravel(), minlength=n)
+    angle = np.zeros(n)
+    p = x[cells]
+    for i in range(3):
+        a, b = p[:, (i + 1) % 3] - p[:, i], p[:, (i + 2) % 3] - p[:, i]
+        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        np.add.at(angle, cells[:, i], np.arctan2(np.abs(cross), np.einsum("mk,mk->m", a, b)))
+    joints = []
+    for v, tag in zip(np.asarray(features.point_nodes, dtype=np.int64),
+                      np.asarray(features.point_tag, dtype=np.int64), strict=True):
+        if int(tag) in named_points or degree[v] != 2 or boundary_degree[v] != 2:
+            continue
+        if round(angle[v] / (np.pi / 2)) != 2:
+            continue
+        tags = {int(t) for t in features.edge_curve[(e == v).any(axis=1)]}
+        if len({frozenset(groups_of.get(t, ())) for t in tags}) == 1:
+            joints.append(int(v))
+    return replace(features, joints=np.asarray(joints, dtype=np.int64))

@@ -30,6 +30,7 @@ constant), else a boundary vertex.
 Pure NumPy/SciPy.
 """
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,9 @@ DETERMINED = 1e-9
 PARITY_TOLERANCE = 1e-4
 #: Rounds of fold repair (:func:`_repair`), and the quantities tried in each.
 REPAIRS, REPAIR_CANDIDATES = 4, 10
+#: CPU seconds the fold repair may take in all: a trial whose re-weighted rows are many
+#: costs a factorisation, and a map that folds in many places would crawl through them.
+REPAIR_SECONDS = 20.0
 #: Largest distance to an integer an integer functional may keep after the final solve.
 INTEGER_TOLERANCE = 1e-6
 
@@ -156,10 +160,11 @@ def model_points(mesh: CutMesh) -> np.ndarray:
     """The vertices that must be quad vertices because of the features (empty without):
     the model points, and every vertex on the model curves (boundary and interior) where
     two curve tags meet or where the curve edges at it are not two (a curve's end inside,
-    a junction of three)."""
+    a junction of three); not the smooth joints
+    (:func:`~ufl_frames.param.features.with_smooth_joints`)."""
     if mesh.features is None:
         return np.zeros(0, dtype=np.int64)
-    points = [np.asarray(mesh.features.point_nodes, dtype=np.int64)]
+    points = [mesh.features.required_points]
     ids, tags = curve_edge_ids(mesh)
     if ids.size:
         ends = mesh.edges[ids].ravel()
@@ -167,7 +172,8 @@ def model_points(mesh: CutMesh) -> np.ndarray:
         degree = np.bincount(ends, minlength=mesh.x.shape[0])
         pairs = np.unique(np.stack([ends, both], axis=1), axis=0)
         kinds = np.bincount(pairs[:, 0], minlength=mesh.x.shape[0])
-        points.append(np.flatnonzero((degree > 0) & ((degree != 2) | (kinds > 1))))
+        meet = np.flatnonzero((degree > 0) & ((degree != 2) | (kinds > 1)))
+        points.append(meet[~np.isin(meet, mesh.features.joints)])
     return np.unique(np.concatenate(points))
 
 
@@ -337,7 +343,7 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     Fy = (F @ system.T).tocsr()
     keep = _distinct_rows(Fy)
     Fk = Fy[keep]
-    rounded, max_shift, repaired = 0, 0.0, 0
+    rounded, max_shift, repaired, stopped = 0, 0.0, 0, False
     fixed = np.zeros(0, dtype=np.int64)
     if keep.size:
         G = _covariance(system.lu, Fk)
@@ -349,7 +355,8 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
         max_shift = float(np.abs(Fk[fixed] @ system.y0 - target[fixed]).max())
         param = system.unfold(Fk[fixed], G[np.ix_(fixed, fixed)], target[fixed])
         if invalid(param).any():
-            param, repaired = _repair(system, F, (Fk, mean, G, phase), fixed, target, param)
+            param, repaired, stopped = _repair(system, F, (Fk, mean, G, phase), fixed,
+                                               target, param)
     else:
         param = system.unfold()
     values = F @ param.uv.ravel()
@@ -364,8 +371,11 @@ def quantise(mesh: CutMesh, scale: float) -> IntegerGridMap:
     if bad:
         raise QuantisationError(
             f"the integer-grid map folds, collapses or winds wrong around {bad} of "
-            f"{mesh.cells.shape[0]} triangles at this quad size: the grid is too coarse for "
-            "the field's singularities or narrow parts; take a smaller quad size")
+            f"{mesh.cells.shape[0]} triangles at this quad size"
+            + (f" (the fold repair stopped after {REPAIR_SECONDS:g} CPU seconds)" if stopped
+               else "")
+            + ": the grid is too coarse for the field's singularities or narrow parts; take "
+            "a smaller quad size")
     increase = ((_misfit_energy(param) - _misfit_energy(seamless))
                 / max(float(system.b @ system.b), 1e-300))
     return IntegerGridMap(param=param, seamless=seamless, functionals=F, values=values,
@@ -380,13 +390,15 @@ def _repair(system: SeamlessSystem, F, rounding, fixed, target, param):
     (a boundary curve and a singular vertex rounded onto one line, say), alone and with
     those the greedy fixed after it rounded again (a boundary curve across a moved
     singular vertex's seam moves with it): at most :data:`REPAIRS` times, each keeping the
-    best trial if it has fewer invalid triangles and leaves every quantity an integer.
-    Returns the map and the number of rounds that moved one."""
+    best trial if it has fewer invalid triangles and leaves every quantity an integer;
+    no trial begins after :data:`REPAIR_SECONDS` of CPU time.
+    Returns the map, the number of rounds that moved one, and whether the time ran out."""
     Fk, mean, G, phase = rounding
     repaired = 0
+    deadline = time.process_time() + REPAIR_SECONDS
     for _ in range(REPAIRS):
         bad = invalid(param)
-        if not bad.any():
+        if not bad.any() or time.process_time() > deadline:
             break
         influence = system.influence(Fk[fixed], G[np.ix_(fixed, fixed)], np.flatnonzero(bad))
         trials = []
@@ -401,6 +413,8 @@ def _repair(system: SeamlessSystem, F, rounding, fixed, target, param):
                            ("regreedy", kept + [(i, target[i] + step)])]
         best = None
         for kind, trial in trials:
+            if time.process_time() > deadline:
+                break
             if kind == "alone":  # the quantity alone, every other one kept
                 trial_fixed, trial_target = trial
             else:  # the quantity and those the greedy fixed after it, rounded again
@@ -422,7 +436,7 @@ def _repair(system: SeamlessSystem, F, rounding, fixed, target, param):
             break
         _, fixed, target, param = best
         repaired += 1
-    return param, repaired
+    return param, repaired, time.process_time() > deadline
 
 
 def _misfit_energy(p: Parametrisation) -> float:

@@ -57,17 +57,23 @@ class RootField:
     into there, made on first use and kept for every later stage.
 
     ``domain`` is the field's :class:`~ufl_frames.mesh.Domain`; the gathered arrays,
-    ``features`` (the model's regions, curves and points on them,
-    :class:`~ufl_frames.param.features.Features`) and the
+    ``features`` (the model's regions, curves and points on them, with the smooth joints
+    a quad edge may span: :class:`~ufl_frames.param.features.Features`,
+    :func:`~ufl_frames.param.features.with_smooth_joints`) and the
     :class:`~ufl_frames.param.cut.CutMesh` live on rank 0 only (None elsewhere).
     """
 
     def __init__(self, frames: FrameField):
+        from ufl_frames.param.features import with_smooth_joints
         from ufl_frames.param.gather import gather_features, gather_field
 
         self.domain = frames.domain
         self._arrays = gather_field(frames.q)  # (x, cells, rows) on rank 0
         self.features = gather_features(frames.domain)
+        if self.features is not None:  # a polyline's vertices need not be quad vertices
+            self.features = with_smooth_joints(
+                self.features, self._arrays[0], self._arrays[1],
+                getattr(frames.domain, "physical_groups", ()))
         self._cut = None
 
     def _cut_mesh(self):

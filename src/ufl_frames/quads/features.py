@@ -165,6 +165,11 @@ def quad_features(quad_mesh, x, cells, features: Features):
         on = _on_curve(x, curve_edges, middle, tol)
     else:  # straight edges: both ends on one curve, the middle near it (not across)
         on = _straight_on_curve(x, curve_edges, edge_curve, points, edges, tol)
+        chains = features.curve_chains()
+        if len(features.joints) and chains:  # an edge across joints: the curve under its middle
+            chain = np.array([chains[int(c)] for c in edge_curve], dtype=np.int64)
+            across = _straight_on_curve(x, curve_edges, chain, points, edges, tol)
+            on = np.where(on >= 0, on, across)
     kept = on >= 0
     point_nodes, point_tag = [], []
     if len(features.point_nodes):
@@ -195,15 +200,19 @@ def curve_lengths(points, curve_edges, edge_curve) -> dict:
 
 def feature_problems(quad_mesh, x, cells, features: Features) -> list[str]:
     """What breaks the features on the quads of :func:`quad_features`, one line each (an
-    empty list where nothing does): a model point with no quad vertex; a quad outside the
-    mesh or with a corner outside its region's triangles (straddling an interface); a
-    region whose quads' area, or a curve whose quad edges' length, differs from the
+    empty list where nothing does): a model point (but a smooth joint,
+    :attr:`~ufl_frames.param.features.Features.required_points`) with no quad vertex; a
+    quad outside the mesh or with a corner outside its region's triangles (straddling an
+    interface); a region whose quads' area, or a curve whose quad edges' length, differs from the
     triangles' by more than :data:`RTOL` plus what the quad edges' chords of the curved
-    parts explain (:func:`chord_allowances`)."""
+    parts explain (:func:`chord_allowances`); curves joined by smooth joints count as one
+    (:meth:`~ufl_frames.param.features.Features.curve_chains`)."""
     x = np.asarray(x, dtype=np.float64)[:, :2]
     cells = np.asarray(cells, dtype=np.int64)
     problems = []
-    missing = len(features.point_nodes) - len(quad_mesh.point_nodes)
+    required = np.isin(features.point_nodes, features.required_points)
+    missing = len(set(np.asarray(features.point_tag)[required].tolist())
+                  - set(np.asarray(quad_mesh.point_tag).tolist()))
     if missing:
         problems.append(f"{missing} model points are not quad vertices")
     region = np.asarray(features.cell_region)
@@ -235,6 +244,16 @@ def feature_problems(quad_mesh, x, cells, features: Features) -> list[str]:
                             f"triangles' {expected:.6g} by {abs(got / expected - 1):.2%}")
     expected_lengths = curve_lengths(x, features.curve_edges, np.asarray(features.edge_curve))
     got_lengths = curve_lengths(points, quad_mesh.curve_edges, quad_mesh.edge_curve)
+    chains = features.curve_chains()
+    if len(features.joints):  # curves joined by joints, which quad edges span: as one
+        def by_chain(lengths):
+            out = {}
+            for c, value in lengths.items():
+                out[chains.get(c, c)] = out.get(chains.get(c, c), 0.0) + value
+            return out
+
+        expected_lengths, got_lengths, length_slack = (
+            by_chain(d) for d in (expected_lengths, got_lengths, length_slack))
     for c, expected in expected_lengths.items():
         got = got_lengths.get(c, 0.0)
         if abs(got - expected) > RTOL * expected + length_slack.get(c, 0.0):
