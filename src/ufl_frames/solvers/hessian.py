@@ -183,10 +183,13 @@ class GaussNewtonModel(ActiveSetRules):
     once |g| ≤ τ |g₀| (:meth:`_switch`), which ends Gauss–Newton's linear tail.
 
     With a size target (``problem.size``) G also holds the size term's matrix
-    w H_s (Gauss–Newton, or with ``exact`` the second derivative of M), assembled from its
-    UFL form (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its
-    own: added to G on the 5N path, and as Tᵀ G_M T (a PtAP with the tangent basis) to the
-    lean model's R, whose kernel knows H alone.
+    w H_s (Gauss–Newton, or with ``exact`` the second derivative of M, or with
+    ``size_mode`` its positive semidefinite modification). The lean model's kernels add it
+    to H's element matrix (:func:`kernels.reduced_model_form` with a
+    :class:`~ufl_frames.fem.kernels.SizeKernel`): one matrix, no matrix of its own and no
+    product Tᵀ G_M T a step. The 5N path assembles it from its UFL form
+    (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its own,
+    added to G.
 
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix. By default :class:`~.reduced_pc.ReducedFactorPC` inverts it in
