@@ -30,8 +30,8 @@ TAO_TYPES = (
 HESSIANS = ("hybrid", "exact", "gauss_newton")
 #: Values of ``-frames_size_hessian``: the size misfit's matrix where the Newton model is
 #: exact (``fem.kernels.size_model_form``'s modes: 1, its second derivative, the default;
-#: 2, its positive semidefinite modification).
-SIZE_HESSIANS = {"exact": 1, "modified": 2}
+#: 2, its positive semidefinite modification; 0, its Gauss–Newton form).
+SIZE_HESSIANS = {"exact": 1, "modified": 2, "gauss_newton": 0}
 #: Options naming a PETSc type, by suffix: ``-mbo_ksp_type``, ``-tao_nls_pc_type``...
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 #: Integer options and their least value.

@@ -136,4 +136,5 @@ def test_a_bad_size_hessian_is_one_clear_line():
 
     assert petsc_option_problem({"frames_size_hessian": "modified"}) is None
     problem = petsc_option_problem({"frames_size_hessian": "clipped"})
-    assert problem == "-frames_size_hessian must be one of exact, modified, got 'clipped'"
+    assert problem == ("-frames_size_hessian must be one of exact, modified, gauss_newton, "
+                       "got 'clipped'")
