@@ -73,15 +73,14 @@ def main() -> None:
         G = dolfinx.fem.petsc.create_matrix(misfit)
         unscale = G.createVecLeft()
         unscale.set(1.0)
-        product = None
+        products = []
 
-        def new():
+        def new(R1=R1, one=one):
             R1.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix(R1, one)
             R1.assemble()
 
-        def old():
-            nonlocal product
+        def old(R0=R0, alone=alone, G=G, misfit=misfit, unscale=unscale, products=products):
             R0.zeroEntries()
             dolfinx.fem.petsc.assemble_matrix(R0, alone)
             R0.assemble()
@@ -89,7 +88,8 @@ def main() -> None:
             dolfinx.fem.petsc.assemble_matrix(G, misfit)
             G.assemble()
             G.diagonalScale(unscale, unscale)
-            product = _ptap(G, T, product)
+            product = _ptap(G, T, products[0] if products else None)
+            products[:] = [product]
             R0.axpy(1.0, product, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
 
         times = {}
@@ -106,7 +106,7 @@ def main() -> None:
             PETSc.NormType.FROBENIUS)
         print(f"| {'exact' if exact else 'Gauss–Newton'} | {times['new']:.3f} "
               f"| {times['old']:.3f} | {relative:.1e} |")
-        for obj in (R1, R0, G, unscale, product, difference):
+        for obj in (R1, R0, G, unscale, *products, difference):
             obj.destroy()
 
 
