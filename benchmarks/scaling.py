@@ -145,6 +145,9 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
     newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
     # factorisations per Newton step (the active-set rounds: more than one)
     faces = [e["factorisations"] for e in result.history[1:] if "factorisations" in e]
+    # the finest level's safeguard: exact factorisations checked / found indefinite
+    last = result.history[-1] if result.history else {}
+    safeguard = (last.get("exact_checks"), last.get("fallbacks"))
     return {
         "case": case, "h": h, "ranks": comm.size,
         "triangles": int(domain.num_cells), "vertices": int(domain.num_vertices),
@@ -155,6 +158,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         "ksp_mean": sum(newton) / len(newton) if newton else None,
         "ksp_max": max(newton) if newton else None, "ksp_per_step": krylov,
         "factorisations_mean": sum(faces) / len(faces) if faces else None,
+        "exact_checks": safeguard[0], "fallbacks": safeguard[1],
         "H_final": result.H_final, "peak_rss_mb": peak_kb / 1024,
         "singularities": sorted(s["index"] for s in field.singularities),
         "quads": quad_record, "levels": field.levels,
@@ -244,13 +248,13 @@ def print_table(records) -> None:
 
     head = ("| case | h | triangles | ranks | mesh s | mbo s | solve s | write s | total s "
             "| Newton its | KSP mean | KSP max | factorisations per step | peak MB/rank "
-            "| final H | reason | singularities |")
+            "| final H | reason | singularities | indefinite / exact factorisations |")
     print(head)
     print(table_rule(head))
     for r in records:
         if r["status"] != "ok":
             print(f"| {r['case']} | {r['h']:.4g} | - | {r['ranks']} | {r['status']} "
-                  f"{r.get('error', '')} |" + " |" * 12)
+                  f"{r.get('error', '')} |" + " |" * 13)
             continue
         s = r["stages"]
         mean = "-" if r["ksp_mean"] is None else f"{r['ksp_mean']:.0f}"
@@ -261,7 +265,8 @@ def print_table(records) -> None:
               f"| {s['mesh']:.2f} | {s['mbo']:.2f} | {s['solve']:.2f} | {s['write']:.2f} "
               f"| {r['total']:.1f} | {r['iterations']} | {mean} | {peak} | {faces} "
               f"| {r['peak_rss_mb']:.0f} | {r['H_final']:.4e} | {r['converged_reason']} "
-              f"| {_indices(r['singularities'])} |")
+              f"| {_indices(r['singularities'])} "
+              f"| {r.get('fallbacks', '-')} / {r.get('exact_checks', '-')} |")
 
 
 def growth_factors(records, case) -> list[tuple]:

@@ -11,7 +11,7 @@ import re
 
 from ufl_frames.bootstrap import init_petsc
 
-__all__ = ["HESSIANS", "MAX_INT", "TAO_TYPES", "petsc_option_problem"]
+__all__ = ["HESSIANS", "MAX_INT", "SIZE_HESSIANS", "TAO_TYPES", "petsc_option_problem"]
 
 #: Largest iteration count accepted (PETSc's 32-bit ``PetscInt``).
 MAX_INT = 2**31 - 1
@@ -28,6 +28,10 @@ TAO_TYPES = (
 )
 #: Values of ``-frames_hessian`` (the Newton model of ``solvers.hessian``).
 HESSIANS = ("hybrid", "exact", "gauss_newton")
+#: Values of ``-frames_size_hessian``: the size misfit's matrix where the Newton model is
+#: exact (``fem.kernels.size_model_form``'s modes: 1, its second derivative, the default;
+#: 2, its positive semidefinite modification; 0, its Gauss–Newton form).
+SIZE_HESSIANS = {"exact": 1, "modified": 2, "gauss_newton": 0}
 #: Options naming a PETSc type, by suffix: ``-mbo_ksp_type``, ``-tao_nls_pc_type``...
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 #: Integer options and their least value.
@@ -65,8 +69,9 @@ def petsc_option_problem(options) -> str | None:
     ``-tao_type`` must be one of :data:`TAO_TYPES`; ``-*ksp_type``, ``-*pc_type`` and
     ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer;
     ``-frames_active_rounds`` an integer >= 0; ``-frames_hessian`` one of
-    :data:`HESSIANS`; dampings and tolerances finite numbers >= 0; switches
-    (``-frames_gn_adapt``, ``-frames_active_consistent``, ...) true or false.
+    :data:`HESSIANS`; ``-frames_size_hessian`` one of :data:`SIZE_HESSIANS`; dampings and
+    tolerances finite numbers >= 0; switches (``-frames_gn_adapt``,
+    ``-frames_active_consistent``, ...) true or false.
     """
     values = dict(options.items() if isinstance(options, dict) else options)
     for name, value in values.items():
@@ -77,7 +82,8 @@ def petsc_option_problem(options) -> str | None:
             continue
         typed = _TYPE_SUFFIX.fullmatch(name)
         checked = typed is not None or name in (
-            "tao_type", "frames_hessian", *_INTS, *_NON_NEGATIVE_REALS, *_REALS)
+            "tao_type", "frames_hessian", "frames_size_hessian", *_INTS,
+            *_NON_NEGATIVE_REALS, *_REALS)
         if not checked:
             continue
         if value is None or str(value).strip() == "":
@@ -86,6 +92,10 @@ def petsc_option_problem(options) -> str | None:
         if name == "tao_type":
             if value not in TAO_TYPES:
                 return f"unsupported -tao_type {value!r}: use one of {', '.join(TAO_TYPES)}"
+        elif name == "frames_size_hessian":
+            if value not in SIZE_HESSIANS:
+                return (f"-frames_size_hessian must be one of {', '.join(SIZE_HESSIANS)}, "
+                        f"got {value!r}")
         elif name == "frames_hessian":
             if value not in HESSIANS:
                 return f"-frames_hessian must be one of {', '.join(HESSIANS)}, got {value!r}"

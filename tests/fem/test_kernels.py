@@ -16,6 +16,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ufl_frames.fem import energy, kernels
+from ufl_frames.frames2d.algebra import ALGEBRA
 from ufl_frames.mesh import build
 from ufl_frames.pipeline import FrameField
 from ufl_frames.solvers.hessian import sobolev_form
@@ -200,3 +201,125 @@ def test_kernels_of_another_algebra_equal_its_ufl_forms(exact):
     assert A.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
     A.destroy()
     B.destroy()
+
+
+# --- the size misfit's matrix (kernels.size_model_form and the sized kernels) -----------
+
+
+def _sized_problem(mesh_size=0.15):
+    """A sized problem on a coarse annulus: a non-isotropic field whose lengths, ratio and
+    angle vary (q1, q2 ≠ 0: β and every term of σ's derivatives count) and a graded
+    target (the residual ∇(σ − log h) is not small), with the kernels' size term."""
+    from ufl_frames.fem.problem import frame_problem
+    from ufl_frames.mesh.sizes import SizeTarget
+
+    domain = build(COMM, "annulus", mesh_size=mesh_size)
+    V = energy.frame_space(domain.mesh)
+
+    def f(x):
+        r = np.hypot(x[0], x[1])
+        phi = np.arctan2(x[1], x[0])
+        return 1 + 0.5 * r * np.cos(phi), 1.2 - 0.3 * r, phi + 0.4 * r**2
+
+    q = energy.interpolate_frames(V, f)
+    problem = frame_problem(q, pin_singularities=False,
+                            size=SizeTarget.expression("0.6 + x*x + 0.5*y"))
+    size = problem.size
+    mode = fem.Constant(V.mesh, PETSc.ScalarType(kernels.SIZE_GAUSS_NEWTON))
+    return q, size, kernels.SizeKernel(size.log_h, size.coefficient, size.inverse_area, mode)
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
+def test_compiled_size_matrix_equals_the_ufl_form(exact):
+    """w H_s times the size misfit's Gauss–Newton form and its second derivative (UFL:
+    ``energy.size_gauss_newton_form``, the derivative of ``energy.size_misfit_form``
+    twice) to round-off, serial and in parallel; the mode is a Constant, read at every
+    assembly."""
+    q, size, kernel = _sized_problem()
+    reference = assembled(fem.form(size.hessian_ufl(q, exact)))
+    compiled = kernels.size_model_form(q, kernel)
+    kernel.mode.value = kernels.SIZE_EXACT if exact else kernels.SIZE_GAUSS_NEWTON
+    B = assembled(compiled)
+    scale = reference.norm(PETSc.NormType.FROBENIUS)
+    reference.axpy(-1.0, B, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert reference.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    reference.destroy()
+    B.destroy()
+
+
+@pytest.mark.serial
+def test_modified_size_matrix_is_positive_semidefinite_and_above_the_exact_one():
+    """The modification (:data:`kernels.SIZE_MODIFIED`) is positive semidefinite where
+    the exact second derivative is not (dense eigenvalues), lies above it (their
+    difference is positive semidefinite) and changes nothing that is not the residual's
+    curvature: it agrees with the exact matrix on a field and target with no residual
+    (the misfit's minimiser: isotropic frames of size ∝ h, h uniform, e = 0 and β = 0)."""
+    q, size, kernel = _sized_problem()
+    form = kernels.size_model_form(q, kernel)
+
+    def dense(mode):
+        kernel.mode.value = mode
+        A = assembled(form)
+        try:
+            return A.convert("dense").getDenseArray().copy()
+        finally:
+            A.destroy()
+
+    exact, modified = dense(kernels.SIZE_EXACT), dense(kernels.SIZE_MODIFIED)
+    scale = np.abs(exact).max()
+    assert np.linalg.eigvalsh(exact).min() < -1e-3 * scale  # the case the change is for
+    assert np.linalg.eigvalsh(modified).min() >= -1e-12 * scale
+    assert np.linalg.eigvalsh(modified - exact).min() >= -1e-12 * scale
+    assert np.abs(modified - modified.T).max() <= 1e-14 * scale
+    # no residual: a uniform isotropic field and a uniform target (log h constant)
+    q.x.array.reshape(-1, 5)[:] = ALGEBRA.frames_to_q(
+        np.ones((q.x.array.size // 5, 2)), np.zeros(q.x.array.size // 5))
+    size.log_h.x.array[:] = 0.3
+    exact, modified = dense(kernels.SIZE_EXACT), dense(kernels.SIZE_MODIFIED)
+    assert np.abs(modified - exact).max() <= 1e-13 * np.abs(exact).max()
+
+
+@pytest.mark.parametrize("mode", [0, 1, 2], ids=["gauss_newton", "exact", "modified"])
+def test_sized_reduced_kernel_equals_the_product_of_the_sum(mode):
+    """The reduced kernel with the size term (one matrix for J = H + w H_s M) equals
+    Pᵀ (A_H + A_M) P, A_H the 5N model matrix and A_M the size term's compiled matrix
+    (the latter tested against UFL above), in parallel too; and the sized action kernel
+    equals (A_H + A_M) d."""
+    q, size, kernel = _sized_problem()
+    kernel.mode.value = mode
+    exact = mode != kernels.SIZE_GAUSS_NEWTON
+    V, mesh = q.function_space, q.function_space.mesh
+    n, columns = V.dofmap.index_map.size_local, 3
+    damping = fem.Constant(mesh, PETSc.ScalarType(0.37))
+    inverse_area = fem.Constant(mesh, PETSc.ScalarType(0.6))
+    global_vertex = V.dofmap.index_map.local_to_global(np.arange(n, dtype=np.int32))
+    blocks = np.sin(np.arange(5 * columns)[None, :] + 0.7 * global_vertex[:, None]).reshape(
+        n, 5, columns)
+    basis = fem.Function(fem.functionspace(mesh, ("Lagrange", 1, (5 * columns,))))
+    basis.x.array.reshape(-1, 5, columns)[:n] = blocks
+    basis.x.scatter_forward()
+    space = fem.functionspace(mesh, ("Lagrange", 1, (columns,)))
+    reduced = assembled(kernels.reduced_model_form(q, basis, space, damping, inverse_area,
+                                                   exact, size=kernel))
+    make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
+    full = assembled(make(q, damping, inverse_area))
+    misfit = assembled(kernels.size_model_form(q, kernel))
+    full.axpy(1.0, misfit, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    T = _block_columns(blocks, V)
+    product = full.PtAP(T)
+    scale = product.norm(PETSc.NormType.FROBENIUS)
+    product.axpy(-1.0, reduced, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert product.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    direction = fem.Function(V)
+    x = V.tabulate_dof_coordinates()
+    direction.x.array[:] = np.cos(np.arange(5)[None, :] + 4.0 * x[:, :1] * x[:, 1:2]).ravel()
+    b = dolfinx.fem.petsc.assemble_vector(
+        kernels.model_action_form(q, direction, damping, inverse_area, exact, size=kernel))
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    reference = full.createVecLeft()
+    full.mult(direction.x.petsc_vec, reference)
+    scale = reference.norm()
+    reference.axpy(-1.0, b)
+    assert reference.norm() <= 1e-13 * scale
+    for obj in (reduced, full, misfit, T, product, b, reference):
+        obj.destroy()

@@ -109,3 +109,32 @@ def test_the_unsized_problem_never_falls_back(monkeypatch):
     field = FrameField.initial(build(COMM, "piano", mesh_size=0.1))
     field.solve(max_it=500)
     assert seen and not any(guarded or count for guarded, count in seen)
+
+
+def test_modified_size_hessian_reaches_the_same_minimum_with_fewer_indefinite_steps():
+    """``-frames_size_hessian modified`` (the misfit's second derivative made positive
+    semidefinite, ``kernels.SIZE_MODIFIED``) ends at the exact model's minimum (both stop
+    on J's relative change of 1e-4 a step, ``-frames_h_rtol``, or on the gradient, hence
+    1e-3), and a smaller share of its exact factorisations is indefinite (the history's
+    safeguard counts: checked ≥ fallen back)."""
+    exact = sized_solve()
+    modified = sized_solve({"frames_size_hessian": "modified"})
+    for result in (exact, modified):
+        assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
+        last = result.history[-1]
+        assert 0 < last["exact_checks"] and 0 <= last["fallbacks"] <= last["exact_checks"]
+    assert modified.H_final == pytest.approx(exact.H_final, rel=1e-3)
+
+    def share(result):
+        return result.history[-1]["fallbacks"] / result.history[-1]["exact_checks"]
+
+    assert share(modified) < share(exact)
+
+
+def test_a_bad_size_hessian_is_one_clear_line():
+    from ufl_frames.petsc_options import petsc_option_problem
+
+    assert petsc_option_problem({"frames_size_hessian": "modified"}) is None
+    problem = petsc_option_problem({"frames_size_hessian": "clipped"})
+    assert problem == ("-frames_size_hessian must be one of exact, modified, gauss_newton, "
+                       "got 'clipped'")

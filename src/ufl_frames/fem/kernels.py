@@ -53,12 +53,31 @@ from ufl_frames.fem.energy import check_frame_function  # noqa: E402
 from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 
 __all__ = ["model_kernel_source", "damped_gauss_newton_form", "damped_hessian_form",
-           "reduced_model_form", "model_action_form"]
+           "reduced_model_form", "model_action_form", "size_model_form", "SizeKernel",
+           "SIZE_GAUSS_NEWTON", "SIZE_EXACT", "SIZE_MODIFIED"]
+
+#: The size misfit's matrix in the kernels (:class:`SizeKernel` ``mode``): its Gauss–Newton
+#: form, its second derivative, or the second derivative made positive semidefinite per
+#: quadrature point (:func:`size_model_form`).
+SIZE_GAUSS_NEWTON, SIZE_EXACT, SIZE_MODIFIED = 0, 1, 2
 
 _NAMES = {False: "ufl_frames_damped_gauss_newton", True: "ufl_frames_damped_hessian"}
 _ARGUMENTS = ("(double* restrict A, const double* restrict w, const double* restrict c, "
               "const double* restrict coordinate_dofs, const int* restrict entity_local_index, "
               "const uint8_t* restrict quadrature_permutation, void* custom_data)")
+
+
+@dataclass(frozen=True)
+class SizeKernel:
+    """What the kernels need of the size target's term w H_s M (2D frames,
+    :class:`ufl_frames.fem.problem.SizeTerm`): log h (a scalar P1 function), the factor
+    w H_s, 1/A and the mode (:data:`SIZE_GAUSS_NEWTON`, :data:`SIZE_EXACT`,
+    :data:`SIZE_MODIFIED`), each Constant read at every assembly."""
+
+    log_h: fem.Function
+    coefficient: fem.Constant
+    inverse_area: fem.Constant
+    mode: fem.Constant
 
 
 @dataclass(frozen=True)
@@ -133,10 +152,24 @@ def _reduced_names(algebra) -> dict:
 
 #: The same matrices' products with a field (linear forms).
 _ACTION_NAMES = {exact: f"{_NAMES[exact]}_action" for exact in (False, True)}
+#: The size misfit's matrix alone (:func:`size_model_form`).
+_SIZE_NAME = "ufl_frames_size_model"
+#: The kernels with the size misfit's matrix added (suffix of the reduced and action names).
+_SIZED = "_sized"
+
+
+def _has_size(algebra) -> bool:
+    """Whether the size misfit's kernels are written for ``algebra``: 2D frames (σ and β
+    read q0, q1, q2 of the 2D Odeco coefficients, :func:`energy.log_size`)."""
+    return algebra.dim == 2 and algebra.count == 5 and algebra.cell == "triangle"
 
 
 def _all_names(algebra) -> tuple[str, ...]:
-    return (*_NAMES.values(), *_reduced_names(algebra).values(), *_ACTION_NAMES.values())
+    names = (*_NAMES.values(), *_reduced_names(algebra).values(), *_ACTION_NAMES.values())
+    if not _has_size(algebra):
+        return names
+    sized = (*_reduced_names(algebra).values(), *_ACTION_NAMES.values())
+    return (*names, _SIZE_NAME, *(name + _SIZED for name in sized))
 
 
 def _bracket_lines(algebra, z: _Sizes) -> tuple[list[str], list[str], list[str]]:
@@ -315,18 +348,37 @@ def _reduced_gauss_newton_lines(z: _Sizes, a_lines, b_lines) -> list[str]:
     ]
 
 
-def _reduced_hessian_and_action_lines(z: _Sizes) -> list[str]:
-    """C functions ``reduced_hessian`` (Tᵀ A T from the nd × nd matrix) and ``action``
-    (A d)."""
+def _reduced_hessian_and_action_lines(z: _Sizes, size: bool) -> list[str]:
+    """C functions ``reduced_hessian`` (Tᵀ A T from the nd × nd matrix), ``project``
+    (R += Tᵀ A T) and ``action`` (A d); with ``sized`` (an argument of the C functions,
+    where ``size``: the size misfit's kernel is in the source) the size misfit's matrix
+    (``size_model``, its log h at ``logh``, c[2] = w H_s, c[3] = 1/A, c[4] = the mode) is
+    added to A first."""
     n, nv, nd = z.n, z.nv, z.nd
+
+    def sized_line(logh: str) -> list[str]:
+        if not size:
+            return []
+        return [f"  if (sized) size_model(A, w, {logh}, c[2], c[3], (int)c[4], x);"]
+
     return [
+        "static inline void project(double* restrict R, const double* restrict A,",
+        "                           const double* restrict w, const int nc);",
         f"/* the full Hessian in tangent coordinates: Tᵀ A T from the {nd} × {nd} matrix */",
         "static inline void reduced_hessian(double* restrict R, const double* restrict w,",
         "                                   const double* restrict c,",
-        "                                   const double* restrict x, const int nc)",
+        "                                   const double* restrict x, const int nc,",
+        "                                   const int sized)",
         "{",
         f"  double A[{nd * nd}] = {{0}};",
         "  model(A, w, c, x, 1);",
+        *sized_line(f"w + {nd} + {nd} * nc"),
+        "  project(R, A, w, nc);",
+        "}",
+        "/* R += Tᵀ A T, T the tangent basis after q in w */",
+        "static inline void project(double* restrict R, const double* restrict A,",
+        "                           const double* restrict w, const int nc)",
+        "{",
         f"  const double* restrict T = w + {nd};",
         f"  const int m = {nv} * nc;",
         f"  double AT[{nd} * {nv * max(z.ncs)}];  /* A T: {nd} × {nv} nc */",
@@ -352,13 +404,206 @@ def _reduced_hessian_and_action_lines(z: _Sizes) -> list[str]:
         "/* the model's product with a field d (after q in w): b = A d */",
         "static inline void action(double* restrict b, const double* restrict w,",
         "                          const double* restrict c, const double* restrict x,",
-        "                          const int exact)",
+        "                          const int exact, const int sized)",
         "{",
         f"  double A[{nd * nd}] = {{0}};",
         "  model(A, w, c, x, exact);",
+        *sized_line(f"w + {2 * nd}"),
         f"  for (int r = 0; r < {nd}; ++r)",
         f"    for (int s = 0; s < {nd}; ++s)",
         f"      b[r] += A[{nd} * r + s] * w[{nd} + s];",
+        "}",
+    ]
+
+
+def _size_lines(z: _Sizes) -> list[str]:
+    """C functions of the size misfit's matrix (2D frames only, :func:`size_model_form`):
+    ``eigen3`` (a 3 × 3 symmetric eigendecomposition by cyclic Jacobi rotations) and
+    ``size_model``, which adds w H_s times the element matrix of M's Gauss–Newton form
+    (mode 0), its second derivative (mode 1) or the positive semidefinite modification of
+    the second derivative (mode 2) to A (nd × nd)."""
+    n, nv, nd = z.n, z.nv, z.nd
+    sum_per_q0 = 8.0 / (3.0 * float(np.sqrt(2.0)))
+    third, sixth = repr(2.0 / 3.0), repr(1.0 / 6.0)
+    return [
+        "/* a (3 × 3, symmetric) = v diag(lam) vᵀ, v's columns the eigenvectors; a is",
+        "   overwritten. Cyclic Jacobi rotations until the off-diagonal part is round-off. */",
+        "static void eigen3(double a[3][3], double lam[3], double v[3][3])",
+        "{",
+        "  for (int i = 0; i < 3; ++i)",
+        "    for (int j = 0; j < 3; ++j)",
+        "      v[i][j] = (i == j) ? 1.0 : 0.0;",
+        "  for (int sweep = 0; sweep < 60; ++sweep)",
+        "  {",
+        "    const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];",
+        "    const double diagonal = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];",
+        "    if (off <= 1e-34 * diagonal || off == 0.0)",
+        "      break;",
+        "    for (int p = 0; p < 2; ++p)",
+        "      for (int q = p + 1; q < 3; ++q)",
+        "      {",
+        "        if (a[p][q] == 0.0)",
+        "          continue;",
+        "        const double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);",
+        "        const double t = fabs(theta) > 1e150 ? 0.5 / theta",
+        "          : (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));",
+        "        const double c = 1.0 / sqrt(t * t + 1.0), s = t * c;",
+        "        for (int k = 0; k < 3; ++k)",
+        "        {",
+        "          const double kp = a[k][p], kq = a[k][q];",
+        "          a[k][p] = c * kp - s * kq; a[k][q] = s * kp + c * kq;",
+        "        }",
+        "        for (int k = 0; k < 3; ++k)",
+        "        {",
+        "          const double pk = a[p][k], qk = a[q][k];",
+        "          a[p][k] = c * pk - s * qk; a[q][k] = s * pk + c * qk;",
+        "        }",
+        "        for (int k = 0; k < 3; ++k)",
+        "        {",
+        "          const double kp = v[k][p], kq = v[k][q];",
+        "          v[k][p] = c * kp - s * kq; v[k][q] = s * kp + c * kq;",
+        "        }",
+        "      }",
+        "  }",
+        "  for (int i = 0; i < 3; ++i)",
+        "    lam[i] = a[i][i];",
+        "}",
+        "/* f(a) = v diag(f(lam)) vᵀ of a symmetric 3 × 3 a: |a| (positive = 0) or a₊ (1) */",
+        "static void spectral3(const double a[3][3], double out[3][3], const int positive)",
+        "{",
+        "  double b[3][3], lam[3], v[3][3];",
+        "  for (int i = 0; i < 3; ++i)",
+        "    for (int j = 0; j < 3; ++j)",
+        "      b[i][j] = a[i][j];",
+        "  eigen3(b, lam, v);",
+        "  for (int i = 0; i < 3; ++i)",
+        "    lam[i] = positive ? (lam[i] > 0.0 ? lam[i] : 0.0) : fabs(lam[i]);",
+        "  for (int i = 0; i < 3; ++i)",
+        "    for (int j = 0; j < 3; ++j)",
+        "      out[i][j] = lam[0] * v[i][0] * v[j][0] + lam[1] * v[i][1] * v[j][1]",
+        "                  + lam[2] * v[i][2] * v[j][2];",
+        "}",
+        "/* weight × the element matrix of M = ½ ∫ |∇(σ(q) − log h)|² + ½ (1/A) ∫ |β(q)|², added",
+        "   to A: σ = ½ log P, P = l1 l2 = s²/4 − q1² − q2², s = c0 q0; β = (2/c0)(q1, q2)/q0.",
+        "   mode 0: Gauss–Newton; 1: the second derivative; 2: its positive semidefinite",
+        "   modification (the residual's curvature clipped per quadrature point). */",
+        "static inline void size_model(double* restrict A, const double* restrict w,",
+        "                              const double* restrict logh, const double weight,",
+        "                              const double inverse_area, const int mode,",
+        "                              const double* restrict x)",
+        "{",
+        *z.cell.gradients,
+        "  double gq[3][2], gl[2];",
+        "  for (int k = 0; k < 2; ++k)",
+        "  {",
+        "    gl[k] = " + " + ".join(f"logh[{v}] * dphi[{v}][k]" for v in range(nv)) + ";",
+        "    for (int m = 0; m < 3; ++m)",
+        "      gq[m][k] = " + " + ".join(f"w[{n * v} + m] * dphi[{v}][k]" for v in range(nv))
+        + ";",
+        "  }",
+        "  /* FFCx's rule of degree 2 (basix): weights area / 3 */",
+        f"  static const double phi[3][3] = {{{{{third}, {sixth}, {sixth}}}, "
+        f"{{{sixth}, {sixth}, {third}}}, {{{sixth}, {third}, {sixth}}}}};",
+        "  const double wp = weight * area / 3.0;",
+        f"  const double c0 = {sum_per_q0!r}, kb = 2.0 / c0;",
+        "  const double ddp[3] = {0.5 * c0 * c0, -2.0, -2.0};",
+        "  for (int p = 0; p < 3; ++p)",
+        "  {",
+        "    double qp[3];",
+        "    for (int m = 0; m < 3; ++m)",
+        "      qp[m] = " + " + ".join(f"phi[p][{v}] * w[{n * v} + m]" for v in range(nv))
+        + ";",
+        "    const double P = 0.25 * c0 * c0 * qp[0] * qp[0] - qp[1] * qp[1] - qp[2] * qp[2];",
+        "    const double dp[3] = {0.5 * c0 * c0 * qp[0], -2.0 * qp[1], -2.0 * qp[2]};",
+        "    double s1[3], S[3][3], e[2], B[2][3];",
+        "    for (int m = 0; m < 3; ++m)",
+        "    {",
+        "      s1[m] = 0.5 * dp[m] / P;",
+        "      for (int l = 0; l < 3; ++l)",
+        "        S[m][l] = 0.5 * ((m == l ? ddp[m] : 0.0) / P - dp[m] * dp[l] / (P * P));",
+        "    }",
+        "    for (int k = 0; k < 2; ++k)",
+        "    {",
+        "      e[k] = s1[0] * gq[0][k] + s1[1] * gq[1][k] + s1[2] * gq[2][k] - gl[k];",
+        "      for (int l = 0; l < 3; ++l)",
+        "        B[k][l] = S[0][l] * gq[0][k] + S[1][l] * gq[1][k] + S[2][l] * gq[2][k];",
+        "    }",
+        "    const double q0 = qp[0];",
+        "    const double beta[2] = {kb * qp[1] / q0, kb * qp[2] / q0};",
+        "    const double db[2][3] = {{-kb * qp[1] / (q0 * q0), kb / q0, 0.0},",
+        "                             {-kb * qp[2] / (q0 * q0), 0.0, kb / q0}};",
+        "    /* the values' block: (1/A) Dβᵀ Dβ, and with the curvature e·∂²∇σ + (1/A) β·∂²β */",
+        "    double G[3][3], R[3][3] = {{0}};",
+        "    for (int m = 0; m < 3; ++m)",
+        "      for (int l = 0; l < 3; ++l)",
+        "        G[m][l] = inverse_area * (db[0][m] * db[0][l] + db[1][m] * db[1][l]);",
+        "    double X[3][3] = {{0}}, egrad[3] = {0}, length = 0.0;",
+        "    const double cross = mode == 2 ? 0.5 : 1.0;",
+        "    if (mode)",
+        "    {",
+        "      const double P2 = P * P, P3 = P2 * P;",
+        "      double eg[3];",
+        "      for (int m = 0; m < 3; ++m)",
+        "        eg[m] = e[0] * gq[m][0] + e[1] * gq[m][1];",
+        "      for (int a = 0; a < 3; ++a)",
+        "        for (int b = 0; b < 3; ++b)",
+        "          for (int m = 0; m < 3; ++m)",
+        "          {",
+        "            const double t = 0.5 * (-((m == a ? ddp[m] : 0.0) * dp[b]",
+        "                                      + (m == b ? ddp[m] : 0.0) * dp[a]",
+        "                                      + (a == b ? ddp[a] : 0.0) * dp[m]) / P2",
+        "                                    + 2.0 * dp[m] * dp[a] * dp[b] / P3);",
+        "            R[a][b] += t * eg[m];",
+        "          }",
+        "      const double d00 = 2.0 * kb / (q0 * q0 * q0), d0 = -kb / (q0 * q0);",
+        "      R[0][0] += inverse_area * (beta[0] * d00 * qp[1] + beta[1] * d00 * qp[2]);",
+        "      R[0][1] += inverse_area * beta[0] * d0; R[1][0] += inverse_area * beta[0] * d0;",
+        "      R[0][2] += inverse_area * beta[1] * d0; R[2][0] += inverse_area * beta[1] * d0;",
+        "      length = sqrt(e[0] * e[0] + e[1] * e[1]);",
+        "      if (mode == 2)",
+        "      {",
+        "        /* [[R, X], [X, 0]] in (δq, ê·∇δq), X = |e| S, becomes its positive part",
+        "           [[R₊ + ½|X|, ½X], [½X, ½|X|]] (that of [[0, X], [X, 0]] is",
+        "           ½[[|X|, X], [X, |X|]]): positive semidefinite, not below the exact */",
+        "        double Rp[3][3], absS[3][3];",
+        "        spectral3(R, Rp, 1);",
+        "        spectral3(S, absS, 0);",
+        "        for (int a = 0; a < 3; ++a)",
+        "          for (int b = 0; b < 3; ++b)",
+        "          {",
+        "            X[a][b] = 0.5 * length * absS[a][b];",
+        "            R[a][b] = Rp[a][b] + X[a][b];",
+        "          }",
+        "      }",
+        "    }",
+        f"    for (int v = 0; v < {nv}; ++v)",
+        "    {",
+        "      const double ev = e[0] * dphi[v][0] + e[1] * dphi[v][1];",
+        "      egrad[v] = length > 0.0 ? ev / length : 0.0;",
+        "    }",
+        f"    for (int v = 0; v < {nv}; ++v)",
+        "      for (int a = 0; a < 3; ++a)",
+        "      {",
+        "        const double da0 = phi[p][v] * B[0][a] + s1[a] * dphi[v][0];",
+        "        const double da1 = phi[p][v] * B[1][a] + s1[a] * dphi[v][1];",
+        "        const double ev = e[0] * dphi[v][0] + e[1] * dphi[v][1];",
+        f"        for (int u = 0; u < {nv}; ++u)",
+        "          for (int b = 0; b < 3; ++b)",
+        "          {",
+        "            const double db0 = phi[p][u] * B[0][b] + s1[b] * dphi[u][0];",
+        "            const double db1 = phi[p][u] * B[1][b] + s1[b] * dphi[u][1];",
+        "            double value = da0 * db0 + da1 * db1",
+        "                           + phi[p][v] * phi[p][u] * (G[a][b] + R[a][b]);",
+        "            if (mode)",
+        "            {",
+        "              const double eu = e[0] * dphi[u][0] + e[1] * dphi[u][1];",
+        "              value += cross * S[a][b] * (phi[p][v] * eu + phi[p][u] * ev)",
+        "                       + X[a][b] * egrad[v] * egrad[u];",
+        "            }",
+        f"            A[{nd} * ({n} * v + a) + {n} * u + b] += wp * value;",
+        "          }",
+        "      }",
+        "  }",
         "}",
     ]
 
@@ -385,30 +630,78 @@ def model_kernel_source(algebra=ALGEBRA) -> str:
     """
     z = _Sizes.of(algebra)
     a_lines, b_lines, second = _bracket_lines(algebra, z)
+    size = _has_size(algebra)
     return "\n".join([
         "#include <math.h>",
         "#include <stdint.h>",
         *_model_lines(z, a_lines, b_lines, second),
+        *(_size_lines(z) if size else []),
+        *(_sized_kernel_lines(z, algebra) if size else []),
         *[line for exact, name in _NAMES.items() for line in (
             f"void {name}{_ARGUMENTS}",
             "{",
             f"  model(A, w, c, coordinate_dofs, {int(exact)});",
             "}")],
         *_reduced_gauss_newton_lines(z, a_lines, b_lines),
-        *_reduced_hessian_and_action_lines(z),
+        *_reduced_hessian_and_action_lines(z, size),
         *[line for (exact, nc), name in _reduced_names(algebra).items() for line in (
             f"void {name}{_ARGUMENTS}",
             "{",
-            f"  reduced_{'hessian' if exact else 'gauss_newton'}(A, w, c, coordinate_dofs, "
-            f"{nc});",
+            f"  {_reduced_call(exact, nc, False)}",
             "}")],
         *[line for exact, name in _ACTION_NAMES.items() for line in (
             f"void {name}{_ARGUMENTS}",
             "{",
-            f"  action(A, w, c, coordinate_dofs, {int(exact)});",
+            f"  action(A, w, c, coordinate_dofs, {int(exact)}, 0);",
             "}")],
+        *(_sized_entry_lines(z, algebra) if size else []),
         "",
     ])
+
+
+def _reduced_call(exact: bool, nc: int, sized: bool) -> str:
+    """The C call of a reduced kernel's body (R in ``A``)."""
+    if exact:
+        return f"reduced_hessian(A, w, c, coordinate_dofs, {nc}, {int(sized)});"
+    call = f"reduced_gauss_newton(A, w, c, coordinate_dofs, {nc});"
+    if sized:
+        call += f" reduced_size(A, w, c, coordinate_dofs, {nc});"
+    return call
+
+
+def _sized_kernel_lines(z: _Sizes, algebra) -> list[str]:
+    """C: ``size_entry`` (the size misfit's matrix alone: w = q, log h; c = w H_s, 1/A,
+    mode) and ``reduced_size`` (R += Tᵀ A_M T, the misfit's matrix in tangent
+    coordinates, for the reduced Gauss–Newton kernel, which forms J T directly)."""
+    nd = z.nd
+    return [
+        f"void {_SIZE_NAME}{_ARGUMENTS}",
+        "{",
+        f"  size_model(A, w, w + {nd}, c[0], c[1], (int)c[2], coordinate_dofs);",
+        "}",
+        "static inline void project(double* restrict R, const double* restrict A,",
+        "                           const double* restrict w, const int nc);",
+        "static inline void reduced_size(double* restrict R, const double* restrict w,",
+        "                                const double* restrict c,",
+        "                                const double* restrict x, const int nc)",
+        "{",
+        f"  double A[{nd * nd}] = {{0}};",
+        f"  size_model(A, w, w + {nd} + {nd} * nc, c[2], c[3], (int)c[4], x);",
+        "  project(R, A, w, nc);",
+        "}",
+    ]
+
+
+def _sized_entry_lines(z: _Sizes, algebra) -> list[str]:
+    """C: the entry points of the reduced and action kernels with the size misfit."""
+    lines = []
+    for (exact, nc), name in _reduced_names(algebra).items():
+        lines += [f"void {name}{_SIZED}{_ARGUMENTS}", "{",
+                  f"  {_reduced_call(exact, nc, True)}", "}"]
+    for exact, name in _ACTION_NAMES.items():
+        lines += [f"void {name}{_SIZED}{_ARGUMENTS}", "{",
+                  f"  action(A, w, c, coordinate_dofs, {int(exact)}, 1);", "}"]
+    return lines
 
 
 #: The kernel modules this process has loaded, by name (every rank loads in the same
@@ -497,7 +790,8 @@ def damped_hessian_form(q: fem.Function, damping: fem.Constant,
 
 def reduced_model_form(q: fem.Function, basis: fem.Function, space: fem.FunctionSpace,
                        damping: fem.Constant, inverse_area: fem.Constant,
-                       exact: bool = False, algebra=ALGEBRA) -> fem.Form:
+                       exact: bool = False, algebra=ALGEBRA,
+                       size: SizeKernel | None = None) -> fem.Form:
     """The model's matrix of :func:`damped_gauss_newton_form` (``exact``:
     :func:`damped_hessian_form`) in tangent coordinates, Tᵀ A T, assembled directly: no
     nN × nN matrix and no product Pᵀ A P (the reduced matrix of
@@ -517,6 +811,9 @@ def reduced_model_form(q: fem.Function, basis: fem.Function, space: fem.Function
         inverse_area: 1/A, read at every assembly.
         exact: The full Hessian instead of Gauss–Newton.
         algebra: The frame algebra of ``q``.
+        size: The size target's term, whose matrix (:func:`size_model_form`, in its
+            ``mode``) is added to the model's before the projection: one matrix for
+            J = H + w H_s M (None: H's alone).
 
     Returns:
         The compiled form (collective: compiles once).
@@ -535,13 +832,15 @@ def reduced_model_form(q: fem.Function, basis: fem.Function, space: fem.Function
                          f"and {space.dofmap.index_map_bs}")
     for other in (basis.function_space, space):
         _check_same_vertices(V, other)
-    return _compiled_form(names[(exact, columns)], [space, space], [q, basis],
-                          [damping, inverse_area], algebra)
+    coefficients, constants = _with_size([q, basis], [damping, inverse_area], size, algebra)
+    suffix = "" if size is None else _SIZED
+    return _compiled_form(names[(exact, columns)] + suffix, [space, space], coefficients,
+                          constants, algebra)
 
 
 def model_action_form(q: fem.Function, direction: fem.Function, damping: fem.Constant,
                       inverse_area: fem.Constant, exact: bool = False,
-                      algebra=ALGEBRA) -> fem.Form:
+                      algebra=ALGEBRA, size: SizeKernel | None = None) -> fem.Form:
     """The vector A d of the matrix A of :func:`damped_gauss_newton_form` (``exact``:
     :func:`damped_hessian_form`) and a P1 field ``direction`` d of ``q``'s space, without
     A (a linear form, the element matrix applied in the kernel).
@@ -554,6 +853,8 @@ def model_action_form(q: fem.Function, direction: fem.Function, damping: fem.Con
         inverse_area: 1/A, read at every assembly.
         exact: The full Hessian instead of Gauss–Newton.
         algebra: The frame algebra of ``q``.
+        size: The size target's term, whose matrix is added (as in
+            :func:`reduced_model_form`).
 
     Returns:
         The compiled linear form on ``q``'s space (collective: compiles once).
@@ -567,8 +868,59 @@ def model_action_form(q: fem.Function, direction: fem.Function, damping: fem.Con
     if direction.function_space.dofmap.index_map_bs != q.function_space.dofmap.index_map_bs:
         raise ValueError(f"the direction must have the frame field's {algebra.count} "
                          f"components")
-    return _compiled_form(_ACTION_NAMES[exact], [q.function_space], [q, direction],
-                          [damping, inverse_area], algebra)
+    coefficients, constants = _with_size([q, direction], [damping, inverse_area], size,
+                                         algebra)
+    suffix = "" if size is None else _SIZED
+    return _compiled_form(_ACTION_NAMES[exact] + suffix, [q.function_space], coefficients,
+                          constants, algebra)
+
+
+def size_model_form(q: fem.Function, size: SizeKernel) -> fem.Form:
+    r"""The matrix of w H_s M (M the size misfit, :func:`energy.size_misfit_form`) with the
+    compiled kernel, in ``size.mode``:
+
+    * :data:`SIZE_GAUSS_NEWTON`: w H_s times :func:`energy.size_gauss_newton_form`'s,
+      ∫ ∇Dσ[δq]·∇Dσ[w] + (1/A) Dβ[δq]·Dβ[w] dx;
+    * :data:`SIZE_EXACT`: w H_s times :func:`energy.size_hessian_form`'s (M's second
+      derivative), which adds the terms with the residuals e = ∇(σ − log h) and β;
+    * :data:`SIZE_MODIFIED`: the second derivative made positive semidefinite per
+      quadrature point. There M's integrand is a function of the jet (a, G) = (q, ∇q) of
+      (q0, q1, q2) (9 numbers); its Hessian is the Gauss–Newton part (positive
+      semidefinite) plus the residual's part, which in (δa, α = ê·δG) is
+      [[R, |e| S], [|e| S, 0]] (S = ∂²σ/∂q², R = e·∂³σ ∇q + (1/A) β·∂²β): indefinite
+      wherever e ≠ 0 and S is not zero. It is replaced by its positive part taken in two
+      pieces, [[R₊ + ½|X|, ½X], [½X, ½|X|]] with X = |e| S (R₊ R's positive part;
+      ½[[|X|, X], [X, |X|]] is the positive part of [[0, X], [X, 0]]): positive
+      semidefinite, and not below the exact one (their difference is R₋ and the negative
+      part of the cross term): the Gauss–Newton part and every direction of positive
+      curvature are kept, the negative curvature is turned positive.
+
+    Same quadrature as the UFL forms (degree :data:`energy.SIZE_QUADRATURE_DEGREE`, basix'
+    three points), so the first two agree with them to round-off.
+
+    Args:
+        q: The 2D frame field.
+        size: log h, w H_s, 1/A and the mode.
+
+    Returns:
+        The compiled bilinear form on q's space (collective: compiles once).
+    """
+    check_frame_function(q, algebra=ALGEBRA)
+    V = q.function_space
+    return _compiled_form(_SIZE_NAME, [V, V], [q, size.log_h],
+                          [size.coefficient, size.inverse_area, size.mode], ALGEBRA)
+
+
+def _with_size(coefficients: list, constants: list, size: SizeKernel | None, algebra):
+    """The kernels' coefficients and constants with the size term's appended (log h; w H_s,
+    1/A, mode)."""
+    if size is None:
+        return coefficients, constants
+    if not _has_size(algebra):
+        raise ValueError("the size misfit's kernels are written for 2D frames only")
+    _check_same_vertices(coefficients[0].function_space, size.log_h.function_space)
+    return ([*coefficients, size.log_h],
+            [*constants, size.coefficient, size.inverse_area, size.mode])
 
 
 def _check_same_vertices(V: fem.FunctionSpace, W: fem.FunctionSpace) -> None:

@@ -183,10 +183,13 @@ class GaussNewtonModel(ActiveSetRules):
     once |g| ≤ τ |g₀| (:meth:`_switch`), which ends Gauss–Newton's linear tail.
 
     With a size target (``problem.size``) G also holds the size term's matrix
-    w H_s (Gauss–Newton, or with ``exact`` the second derivative of M), assembled from its
-    UFL form (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its
-    own: added to G on the 5N path, and as Tᵀ G_M T (a PtAP with the tangent basis) to the
-    lean model's R, whose kernel knows H alone.
+    w H_s (Gauss–Newton, or with ``exact`` the second derivative of M, or with
+    ``size_mode`` its positive semidefinite modification). The lean model's kernels add it
+    to H's element matrix (:func:`kernels.reduced_model_form` with a
+    :class:`~ufl_frames.fem.kernels.SizeKernel`): one matrix, no matrix of its own and no
+    product Tᵀ G_M T a step. The 5N path assembles it from its UFL form
+    (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its own,
+    added to G.
 
     B is a MatShell for TAO; the assembled sparse part (without the rank-one terms)
     is the preconditioning matrix. By default :class:`~.reduced_pc.ReducedFactorPC` inverts it in
@@ -219,7 +222,8 @@ class GaussNewtonModel(ActiveSetRules):
                  damping_min: float = 1e-3, exact: bool = False, adapt: bool = False,
                  release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True,
                  switch: float | None = None, consistent: bool = False,
-                 rounds: int = CONSISTENT_ROUNDS, safeguard: bool = True):
+                 rounds: int = CONSISTENT_ROUNDS, safeguard: bool = True,
+                 size_mode: int = kernels.SIZE_EXACT):
         """The model at ``problem``'s current q (collective; :meth:`free` destroys it).
 
         Args:
@@ -240,7 +244,13 @@ class GaussNewtonModel(ActiveSetRules):
             safeguard: with a size target, an exact step of the hybrid model whose
                 factorisation is indefinite is taken with Gauss–Newton
                 (:meth:`gauss_newton_step`, ``-frames_hessian_safeguard``).
+            size_mode: the size misfit's matrix where the model is exact (lean model,
+                ``-frames_size_hessian``): :data:`kernels.SIZE_EXACT`, its second
+                derivative, or :data:`kernels.SIZE_MODIFIED`, its positive semidefinite
+                modification (slower: 72 Newton steps instead of 25 on the sized piano
+                at 1 887 triangles, benchmarks/README); Gauss–Newton's where the model is.
         """
+        self.size_mode = size_mode
         self.problem, self.damping, self.damping_min = problem, damping, damping_min
         self.consistent = consistent  # see _consistent_active_set
         self.rounds = rounds  # refactorisations at most per step there
@@ -250,6 +260,7 @@ class GaussNewtonModel(ActiveSetRules):
         self.safeguard = safeguard  # see safeguarded
         self.switched = False  # the hybrid model has switched to the exact Hessian
         self.fallbacks = 0  # exact steps taken as Gauss–Newton (gauss_newton_step)
+        self.exact_checks = 0  # exact factorisations the safeguard read the inertia of
         self._gnorm = None  # |g| of the last update (the damping of a fallback)
         self.bound_steps = bound_steps  # see _reached_bound
         self.lean = lean
@@ -276,19 +287,23 @@ class GaussNewtonModel(ActiveSetRules):
         The lean model assembles the reduced matrix Tᵀ G T itself
         (:func:`kernels.reduced_model_form`, T scaled by W⁻¹), with no 5N × 5N matrix G
         and no PtAP product (see :meth:`_build_reduced`)."""
+        if self.size_kernel is not None:
+            self.size_kernel.mode.value = self.size_mode if exact else kernels.SIZE_GAUSS_NEWTON
         if self.lean:
             return kernels.reduced_model_form(self.problem.q, self.scaled_basis,
                                               self.reduced_space,
                                               self.damping_weight, self.inverse_area, exact,
-                                              algebra=self.problem.algebra)
+                                              algebra=self.problem.algebra,
+                                              size=self.size_kernel)
         make = kernels.damped_hessian_form if exact else kernels.damped_gauss_newton_form
         return make(self.problem.q, self.damping_weight, self.inverse_area,
                     algebra=self.problem.algebra)
 
     def _size_form(self, exact: bool) -> fem.Form | None:
-        """The compiled form of the size term's matrix (None without a size target)."""
+        """The compiled form of the size term's matrix (None without a size target, or
+        where the lean model's kernel adds it, :attr:`size_kernel`)."""
         size = self.problem.size
-        if size is None:
+        if size is None or self.size_kernel is not None:
             return None
         return fem.form(size.hessian_ufl(self.problem.q, exact))
 
@@ -312,6 +327,13 @@ class GaussNewtonModel(ActiveSetRules):
                 mesh, ("Lagrange", 1, (problem.algebra.count * columns,))))
             self.reduced_space = fem.functionspace(mesh, ("Lagrange", 1, (columns,)))
         self.product_form, self.direction = None, None  # see _model_product
+        # the lean model's kernels add the size term's matrix (2D frames): one matrix
+        size = problem.size
+        self.size_kernel = None
+        if self.lean and size is not None and problem.algebra.dim == 2:
+            self.size_kernel = kernels.SizeKernel(
+                size.log_h, size.coefficient, size.inverse_area,
+                fem.Constant(mesh, PETSc.ScalarType(kernels.SIZE_GAUSS_NEWTON)))
         self.form = self._model_form(self.exact)
         self.size_form = self._size_form(self.exact)
         if self.size_form is not None:
@@ -651,7 +673,7 @@ class GaussNewtonModel(ActiveSetRules):
         if self.product_form is None or self.product_form[0] != self.exact:
             form = kernels.model_action_form(problem.q, self.direction, self.damping_weight,
                                              self.inverse_area, self.exact,
-                                             algebra=problem.algebra)
+                                             algebra=problem.algebra, size=self.size_kernel)
             self.product_form = (self.exact, form)
         self.direction.x.petsc_vec.pointwiseMult(v, self.unscale)  # d = W⁻¹ v
         self.direction.x.scatter_forward()

@@ -81,8 +81,9 @@ class ReducedFactorPC:
         T, R = self.model.reduced_operator()
         self.ksp.setOperators(R)
         self.ksp.setUp()
-        if self.model.safeguarded and self.negative_pivots() \
-                and self.model.gauss_newton_step():
+        safeguarded = self.model.safeguarded
+        self.model.exact_checks += int(safeguarded and self.model.exact)
+        if safeguarded and self.negative_pivots() and self.model.gauss_newton_step():
             T, R = self.model.reduced_operator()
             self.ksp.setOperators(R)
             self.ksp.setUp()

@@ -69,7 +69,7 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from ufl_frames.fem.problem import FrameProblem  # noqa: E402
-from ufl_frames.petsc_options import HESSIANS, TAO_TYPES  # noqa: E402
+from ufl_frames.petsc_options import HESSIANS, SIZE_HESSIANS, TAO_TYPES  # noqa: E402
 from ufl_frames.solvers.active_set import CONSISTENT_ROUNDS, RELEASE_RATIO  # noqa: E402
 from ufl_frames.solvers.hessian import (  # noqa: E402
     DEFAULT_DAMPING,
@@ -490,6 +490,9 @@ class _TaoSolve:
             self.linear_iterations[1] = self.linear_iterations[0]
             # faces factorised for it: one, or one per round of the consistent rule
             entry["factorisations"] = max(len(model.bound_rounds), 1)
+            # the safeguard's count so far: exact factorisations checked, and those found
+            # indefinite and redone as Gauss–Newton
+            entry["exact_checks"], entry["fallbacks"] = model.exact_checks, model.fallbacks
         history.append(entry)
         if self.checkpoint is not None:
             self.checkpoint(self.snapshot(tao, float(step)))
@@ -571,7 +574,9 @@ class _TaoSolve:
             switch=(opts.getReal("frames_hessian_switch", HYBRID_SWITCH
                                  if self.problem.size is None else SIZED_SWITCH)
                     if hessian == "hybrid" else None),
-            safeguard=opts.getBool("frames_hessian_safeguard", True)))
+            safeguard=opts.getBool("frames_hessian_safeguard", True),
+            size_mode=SIZE_HESSIANS.get(opts.getString("frames_size_hessian", "exact"),
+                                        SIZE_HESSIANS["exact"])))
         if resume is not None and resume.adaptation is not None:
             model.resume(resume.adaptation, resume.model_gnorm0, resume.active,
                          resume.step, exact=resume.exact_hessian,
