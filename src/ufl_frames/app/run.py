@@ -479,7 +479,7 @@ def _resolving_factor(config: RunConfig, target, domain, comm) -> float:
     gathered = comm.gather((h, edges, areas), root=0)
     factor = None
     if comm.rank == 0:
-        h, edges, areas = (np.concatenate(a) for a in zip(*gathered))
+        h, edges, areas = (np.concatenate(a) for a in zip(*gathered, strict=True))
         factor = resolving_factor(h, edges, areas, quads)
     return comm.bcast(factor, root=0)
 
