@@ -884,6 +884,7 @@ class _Solve:
             say(f"parametrisation: misfit {quality['misfit']:.4f}, "
                 f"{quality['flipped_triangles']} flipped triangles, {quality['cuts']} cut(s) "
                 f"of length {quality['cut_length']:.3g}")
+            self._say_pairs(quality)
         if config.quads:
             interrupts.set_stage("the quad mesh")
             quad_size = self._quad_size()
@@ -914,6 +915,15 @@ class _Solve:
                 f"{found['mean_edge_length']:.3g} (target {found['quad_size']:.3g})"
                 + ("" if found["valid"] else f"; INVALID: {'; '.join(found['problems'])}"))
             say("  " + stages.quantisation_line(found))
+            self._say_pairs(found, "  ")
+
+    def _say_pairs(self, quality: dict, indent: str = "") -> None:
+        """The log line of the ± pairs removed before the map (none where none was close)."""
+        from ufl_frames.param.pairs import describe
+
+        line = describe(quality.get("removed_pairs"))
+        if line is not None:
+            self.say(indent + line)
 
     def _stage_failed(self, key: str, stage: str, error: BaseException) -> None:
         """Record that ``stage`` (summary key ``key``) failed with ``error``, and warn: the

@@ -74,26 +74,42 @@ class RootField:
             self.features = with_smooth_joints(
                 self.features, self._arrays[0], self._arrays[1],
                 getattr(frames.domain, "physical_groups", ()))
-        self._cut = None
+        self._cuts = {}
 
-    def _cut_mesh(self):
-        from ufl_frames.param import cut
+    def _cut_mesh(self, quad_size=None, quad_count=None):
+        """(the cut mesh, the :class:`~ufl_frames.param.pairs.RemovedPairs`) at this quad
+        size or count (neither: :data:`TRIANGLES_PER_QUAD` triangles a quad): the field
+        with its ± pairs closer than :data:`~ufl_frames.param.pairs.CLOSER_THAN` local
+        quad edges removed (:func:`~ufl_frames.param.pairs.remove_close_pairs`), cut
+        into a disk; one cut per set of pairs removed, kept for every later stage."""
+        from ufl_frames.param import cut, pairs
 
-        if self._cut is None:
-            self._cut = cut.cut_mesh(*self._arrays, features=self.features)
-        return self._cut
+        x, cells, q = self._arrays
+        if quad_size is None and quad_count is None:
+            quad_count = max(1.0, cells.shape[0] / TRIANGLES_PER_QUAD)
+        edge = pairs.local_quad_edge(x, cells, q, quad_size=quad_size, quad_count=quad_count)
+        q_map, removed = pairs.remove_close_pairs(x, cells, q, edge, within=pairs.CLOSER_THAN,
+                                                  features=self.features)
+        if removed.key not in self._cuts:
+            self._cuts[removed.key] = cut.cut_mesh(x, cells, q_map, features=self.features)
+        return self._cuts[removed.key], removed
 
-    def on_root(self, work, failure: str):
-        """``work(cut_mesh)`` on rank 0, which returns (what rank 0 keeps, what every rank
-        gets); that pair, the first None on the other ranks (collective). A failure of the
-        cut or of ``work`` raises ValueError("<failure>: <why>") on every rank."""
+    def on_root(self, work, failure: str, quad_size=None, quad_count=None):
+        """``work(cut_mesh)`` on rank 0, which returns (what rank 0 keeps, the measures
+        every rank gets: a dict); that pair, the first None on the other ranks
+        (collective). The cut mesh is that of :meth:`_cut_mesh` at ``quad_size`` or
+        ``quad_count``; the measures get its ``removed_pairs``
+        (:meth:`~ufl_frames.param.pairs.RemovedPairs.as_dict`). A failure of the cut or
+        of ``work`` raises ValueError("<failure>: <why>") on every rank."""
         from ufl_frames.quads.extract import ExtractionError
 
         comm = self.domain.comm
         kept, shared, error = None, None, None
         if comm.rank == 0:
             try:
-                kept, shared = work(self._cut_mesh())
+                mesh, removed = self._cut_mesh(quad_size, quad_count)
+                kept, shared = work(mesh)
+                shared = dict(shared, removed_pairs=removed.as_dict())
             except (ValueError, np.linalg.LinAlgError, RuntimeError, ExtractionError) as e:
                 error = f"{failure}: {e}"
         error = comm.bcast(error, root=0)
@@ -133,7 +149,8 @@ def parametrise(source, quad_size: float | None = None) -> Parametrised:
         parametrisation = seamless.integrate(mesh, scale)
         return parametrisation, measures.quality(parametrisation)
 
-    kept, quality = _root(source).on_root(work, "cannot parametrise this field")
+    kept, quality = _root(source).on_root(work, "cannot parametrise this field",
+                                          quad_size=quad_size)
     return Parametrised(quality=quality, parametrisation=kept)
 
 
@@ -203,7 +220,9 @@ def quadrangulate(source, quad_size: float | None = None,
                 kept = candidate
         return kept
 
-    kept, quality = root.on_root(work, "cannot make quads of this field")
+    kept, quality = root.on_root(work, "cannot make quads of this field",
+                                 quad_size=size if quad_count is None else None,
+                                 quad_count=quad_count)
     return QuadMeshed(quality=quality, mesh=kept)
 
 
