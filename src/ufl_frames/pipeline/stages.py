@@ -6,9 +6,12 @@
     param = parametrise(root)                   # Parametrised: measures, map on rank 0
     quads = quadrangulate(root, quad_size=0.05) # QuadMeshed: measures, mesh on rank 0
 
-The field is gathered onto rank 0 (:func:`~ufl_frames.param.gather.gather_field`) and cut
-into a disk there (:func:`~ufl_frames.param.cut.cut_mesh`) once per :class:`RootField`:
-both stages start from the same :class:`~ufl_frames.param.cut.CutMesh`. Each stage is
+The field is gathered onto rank 0 (:func:`~ufl_frames.param.gather.gather_field`) once
+per :class:`RootField`; there its ± pairs of singularities closer than half a quad are
+removed (:func:`~ufl_frames.param.pairs.remove_close_pairs`: the map's input changes, the
+field does not) and it is cut into a disk (:func:`~ufl_frames.param.cut.cut_mesh`), once
+per set of pairs removed: stages at quad sizes that remove the same pairs start from the
+same :class:`~ufl_frames.param.cut.CutMesh`. Each stage is
 collective and returns a frozen record whose measures are the same on every rank.
 """
 
@@ -60,7 +63,8 @@ class RootField:
     ``features`` (the model's regions, curves and points on them, with the smooth joints
     a quad edge may span: :class:`~ufl_frames.param.features.Features`,
     :func:`~ufl_frames.param.features.with_smooth_joints`) and the
-    :class:`~ufl_frames.param.cut.CutMesh` live on rank 0 only (None elsewhere).
+    :class:`~ufl_frames.param.cut.CutMesh` (one per set of close ± pairs removed:
+    :meth:`_cut_mesh`) live on rank 0 only (None elsewhere).
     """
 
     def __init__(self, frames: FrameField):
@@ -133,7 +137,8 @@ def parametrise(source, quad_size: float | None = None) -> Parametrised:
             outline (default: about one quad per :data:`TRIANGLES_PER_QUAD` triangles).
 
     Returns:
-        The map and its measures.
+        The map and its measures (with ``removed_pairs``: the ± pairs closer than
+        :data:`~ufl_frames.param.pairs.CLOSER_THAN` quad edges removed before the map).
 
     Raises:
         ValueError: on every rank, where the field cannot be cut or integrated.
@@ -193,7 +198,9 @@ def quadrangulate(source, quad_size: float | None = None,
     Returns:
         The mesh and its measures (:func:`~ufl_frames.quads.measures.quad_quality`, with
         ``valid``, ``problems``, ``quad_size``, ``quantisation`` (``layout`` or
-        ``greedy``) with its counts, ``fallback_reason``, and the seconds per stage).
+        ``greedy``) with its counts, ``fallback_reason``, ``removed_pairs`` (the ± pairs
+        removed before the map, :func:`~ufl_frames.param.pairs.remove_close_pairs`, at the
+        size asked or the count's first size), and the seconds per stage).
 
     Raises:
         ValueError: on every rank, where no valid integer-grid map exists at that size,
