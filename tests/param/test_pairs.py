@@ -126,3 +126,21 @@ def test_a_pair_at_the_boundary_keeps_the_boundary_frames():
     assert np.array_equal(new[boundary], q[boundary])
     assert not np.isin(record.changed, boundary).any()
     assert cut.cut_mesh(x, cells, new).singular.size == 0
+
+
+def test_two_pairs_apart_are_both_removed_and_a_far_singularity_stays():
+    """Two planted pairs and a lone +1/4 far from both: both pairs go, the lone one stays
+    where it was."""
+    x, cells = grid(40, 40, -1, 1, -1, 1)
+    arg = lambda p: np.arctan2(x[:, 1] - p[1], x[:, 0] - p[0])  # noqa: E731
+    lone = (0.013, 0.61)
+    theta = (arg(A - [0.5, 0.4]) - arg(B - [0.5, 0.4]) + arg(A + [0.5, -0.4])
+             - arg(B + [0.5, -0.4]) + arg(lone)) / 4
+    q = odeco.frames_to_q(np.ones((x.shape[0], 2)), theta)
+    before = cut.cut_mesh(x, cells, q)
+    assert sorted(before.turns.tolist()) == [-1, -1, 1, 1, 1]
+    new, record = pairs.remove_close_pairs(x, cells, q, np.full(x.shape[0], 2.0), within=0.3)
+    assert len(record.removed) == 2 and record.kept == ()
+    after = cut.cut_mesh(x, cells, new)
+    assert after.turns.tolist() == [1]
+    assert np.linalg.norm(x[after.singular[0]] - lone) < 0.05 * np.sqrt(2)

@@ -162,7 +162,7 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
     neighbours = sp.csr_matrix((np.ones(2 * edges.shape[0]),
                                 (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n))
     removed, kept, used, changed = [], [], set(), []
-    q_new = q.copy()
+    q_new, current = q.copy(), np.sort(singular)  # the singular vertices left
     for d, i, j in close:
         a, b = int(positive[i]), int(negative[j])
         entry = {"plus": x[a].tolist(), "minus": x[b].tolist(), "distance": float(d),
@@ -171,17 +171,17 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
             continue
         used.update((a, b))
         patch = _patch(x, cells, neighbours, a, b, d, rim)
-        why = _unusable(patch, cells, edges, faces, blocked, singular, {a, b})
+        why = _unusable(patch, cells, edges, faces, blocked, current, {a, b})
         if why is None:
             trial = q_new.copy()
             why = _smooth_inside(x, cells, trial, patch)
             if why is None:
                 left, _ = _singular(cells, trial, edges, faces)
-                expected = np.setdiff1d(_singular(cells, q_new, edges, faces)[0], [a, b])
-                if not np.array_equal(np.sort(left), np.sort(expected)):
+                expected = np.setdiff1d(current, [a, b])
+                if not np.array_equal(np.sort(left), expected):
                     why = "the smooth field inside would still be singular"
                 else:
-                    q_new = trial
+                    q_new, current = trial, expected
                     changed.append(patch[0])
                     removed.append(entry)
                     continue
