@@ -78,8 +78,9 @@ def test_a_boundary_point_at_180_degrees_is_a_layout_node():
 def test_root_field_cuts_with_its_features():
     x, cells, features = interface_box()
     root = RootField.__new__(RootField)  # the gathered arrays alone, no distributed field
-    root._arrays, root._cut, root.features = (x, cells, constant_field(x)), None, features
-    assert root._cut_mesh().features is features
+    root._arrays, root._cuts, root.features = (x, cells, constant_field(x)), {}, features
+    mesh, removed = root._cut_mesh()
+    assert mesh.features is features and removed.removed == ()
 
 
 @pytest.mark.parametrize("size", [0.07])
