@@ -50,6 +50,9 @@ DETOUR = 3.0
 #: The cap is never below this share of the reference size (a sharp wedge would ask for
 #: sizes going to zero at its tip).
 FLOOR_SHARE = 1.0 / 32.0
+#: Gmsh's ``Mesh.LcIntegrationPrecision`` while the cap is in place (its default 1e-9
+#: made Gmsh ask the Python callback for 3·10⁶ sizes along the curves of a rotor sector).
+INTEGRATION_PRECISION = 1e-4
 #: Samples along the curves per reference size, and at most this many in all.
 SAMPLES_PER_SIZE = 4.0
 MAX_SAMPLES = 40_000
@@ -170,17 +173,20 @@ def feature_caps(samples: Samples, inside, reference: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FeatureSize:
-    """The graded cap h_cap(x) = min_p (c(p) + g |x − p|) over the kept samples.
+    """The graded cap h_cap(x) = min_p (c(p) + g |x − p|) over the kept samples, where
+    that is below ``reach`` (inf elsewhere: no cap).
 
     Attributes:
         points: (k, 2) the samples that cap something (the others are dominated).
         caps: (k,) their caps c(p).
         grading: g.
+        reach: Caps from here up are none.
     """
 
     points: np.ndarray
     caps: np.ndarray
     grading: float = GRADING
+    reach: float = math.inf
 
     @classmethod
     def of(cls, points: np.ndarray, caps: np.ndarray, grading: float = GRADING,
@@ -200,7 +206,16 @@ class FeatureSize:
                     continue
             kept.append(int(i))
         k = np.asarray(kept, dtype=int)
-        return cls(points[k], caps[k], grading)
+        return cls(points[k], caps[k], grading, below)
+
+    def near(self, box) -> "FeatureSize":
+        """The samples whose graded cap is below ``reach`` somewhere in the box
+        (x0, y0, x1, y1): the same cap there, from fewer samples."""
+        x0, y0, x1, y1 = box
+        dx = np.maximum(np.maximum(x0 - self.points[:, 0], self.points[:, 0] - x1), 0.0)
+        dy = np.maximum(np.maximum(y0 - self.points[:, 1], self.points[:, 1] - y1), 0.0)
+        keep = self.caps + self.grading * np.hypot(dx, dy) < self.reach
+        return FeatureSize(self.points[keep], self.caps[keep], self.grading, self.reach)
 
     def __call__(self, x, y) -> np.ndarray:
         """h_cap at the points (x, y) (arrays or floats; inf without samples)."""
@@ -210,7 +225,7 @@ class FeatureSize:
             p, c = self.points[start:start + 4096], self.caps[start:start + 4096]
             d = np.hypot(x[..., None] - p[:, 0], y[..., None] - p[:, 1])
             out = np.minimum(out, np.min(c + self.grading * d, axis=-1, initial=np.inf))
-        return out
+        return np.where(out < self.reach, out, np.inf)
 
 
 def extra_triangles(caps: np.ndarray, step: np.ndarray, size: float,
@@ -377,10 +392,24 @@ def install(field: FeatureSize, scale: float, notes: list[str]) -> None:
     if not len(field.caps):
         return
 
+    # Gmsh asks for sizes millions of times along curves (it integrates 1/size along
+    # each): every entity gets the samples that can cap it, once.
+    local: dict[tuple[int, int], FeatureSize] = {}
+
     def size(dim, tag, x, y, z, lc):
-        return float(min(lc, scale * field(x, y)))
+        if (dim, tag) not in local:
+            x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(dim, tag) if dim > 0 else (
+                x, y, 0, x, y, 0)
+            local[dim, tag] = field.near((x0, y0, x1, y1)) if dim > 0 else field
+        near = local[dim, tag]
+        if not len(near.caps):
+            return float(lc)
+        return float(min(lc, scale * near(x, y)))
 
     gmsh.model.mesh.setSizeCallback(size)
+    gmsh.option.setNumber("Mesh.LcIntegrationPrecision",
+                          max(gmsh.option.getNumber("Mesh.LcIntegrationPrecision"),
+                              INTEGRATION_PRECISION))
     notes.append(f"sizes capped near {len(field.caps)} boundary points by the shape's local "
                  f"feature size ({ELEMENTS_ACROSS:g} elements across thin parts, "
                  f"{POINTS_PER_TURN:g} per turn of curves; smallest cap "
