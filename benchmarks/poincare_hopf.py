@@ -82,9 +82,10 @@ def main(argv=None) -> int:
               f"{'yes' if row['agrees'] else 'NO':>3s} {row['seconds']:7.1f}", flush=True)
     solved = [r for r in rows if r["status"] == "ok"]
     agree = [r for r in solved if r["agrees"]]
+    unsolved = ", ".join(f"{r['file']} ({r['status']})" for r in rows if r["status"] != "ok")
+    disagree = ", ".join(r["file"] for r in solved if not r["agrees"])
     print(f"\n{len(rows)} files: {len(solved)} solved, {len(agree)} agree with Poincaré–Hopf; "
-          f"not solved: {', '.join(r['file'] + ' (' + r['status'] + ')' for r in rows if r['status'] != 'ok') or 'none'}; "
-          f"disagree: {', '.join(r['file'] for r in solved if not r['agrees']) or 'none'}")
+          f"not solved: {unsolved or 'none'}; disagree: {disagree or 'none'}")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

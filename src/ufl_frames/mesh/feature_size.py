@@ -19,10 +19,12 @@ curvature κ(p). The cap at a sample p is
            \frac{2\pi}{n_{\text{turn}}\,\kappa(p)}\Big),
 
 with :data:`ELEMENTS_ACROSS` elements across and :data:`POINTS_PER_TURN` per full turn,
-never below :data:`FLOOR_SHARE` of the reference size; :class:`FeatureSize` grades it
-into the domain, h_cap(x) = min_p (c(p) + g |x − p|) with the grading g =
-:data:`GRADING`, and :func:`install` hands it to Gmsh as a size callback that only ever
-lowers the size Gmsh would use (the file's, or the automatic one).
+never below :data:`FLOOR_SHARE` of the reference size h_ref (the automatic size, or a
+file's largest); :class:`FeatureSize` grades it into the domain, h_cap(x) = min_p (c(p) +
+g |x − p|) with the grading g = :data:`GRADING`, where that is below h_ref (no cap
+elsewhere), and :func:`install` hands it to Gmsh as a size callback that only ever
+lowers the size Gmsh would use (the file's, or the automatic one). Sizes given
+explicitly (``--mesh-size``) are not capped (:func:`ufl_frames.mesh.meshing.mesh_model`).
 
 A pair of boundary points counts as "across the domain" when the midpoint of the
 segment between them is inside a surface and the way between them along the boundary

@@ -6,10 +6,10 @@ frame field needs), resolves curved boundaries with at least
 :data:`CURVE_POINTS_PER_TURN` points per full turn, and sizes the mesh: the file's own
 sizes where it sets any and no size is given, else an absolute size or about
 :data:`AUTO_TRIANGLES` triangles; without an absolute size, the sizes are capped where
-the shape is thin or tightly curved (:mod:`ufl_frames.mesh.feature_size`); an estimate above ``max_triangles`` is refused before
-meshing, and a large uniform mesh is made by refining a coarser one
-(:data:`REFINE_ABOVE`). :func:`check_crossings` refuses, before meshing, boundaries
-whose curves cross (Gmsh's meshing never ends on them).
+the shape is thin or tightly curved (:mod:`ufl_frames.mesh.feature_size`); an estimate
+above ``max_triangles`` is refused before meshing, and a large uniform mesh is made by
+refining a coarser one (:data:`REFINE_ABOVE`). :func:`check_crossings` refuses, before
+meshing, boundaries whose curves cross (Gmsh's meshing never ends on them).
 """
 
 import math
