@@ -1313,8 +1313,11 @@ def test_cli_killed_while_writing_leaves_no_staging_folder(mpi, rank, tmp_path):
 @pytest.mark.parametrize(
     "args, words",
     [(["annulus", "--max-triangles", "10"], ["more than the limit 10"]),
-     (["annulus", "--quads", "--quad-size", "1e-4"], ["quads, more than the limit 2e+06"])],
-    ids=["max-triangles", "max-quads"],
+     (["annulus", "--quads", "--quad-size", "1e-4", "--mesh-size", "0.05"],
+      ["quads, more than the limit 2e+06"]),
+     (["annulus", "--quads", "--quad-size", "1e-4"],
+      ["triangles, more than the limit", "choose a larger --quad-size"])],
+    ids=["max-triangles", "max-quads", "quad-sized-triangles"],
 )
 def test_mpirun_size_limits(args, words, tmp_path):
     proc = run_cli("solve", *args, "-q", cwd=tmp_path, mpi=True)

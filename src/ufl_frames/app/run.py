@@ -579,7 +579,16 @@ def run(config: RunConfig, comm=None) -> dict:
     record = run_record(config, comm, petsc_options)
     saved = _saved_checkpoint(config, out, record, comm)
     check_output_folder(out, config.force, comm, resuming=config.resume is not None)
-    domains, target = _mesh(config, comm, say)
+    from ufl_frames.mesh.domain import TooManyTriangles
+
+    try:
+        domains, target = _mesh(config, comm, say)
+    except InputError as e:
+        if sized and isinstance(e.__cause__, TooManyTriangles):
+            raise InputError(f"{e} (with --quads --quad-size {config.quad_size:g} the "
+                             "triangles are no larger than the quads: choose a larger "
+                             "--quad-size, or set --mesh-size)") from e
+        raise
     domain = domains[-1]
     _check_sizes(config, domain, comm)
     interrupts.set_stage("the MBO initial field")

@@ -90,11 +90,11 @@ def create(comm: MPI.Comm, make, source: str, cad: bool,
                                          time_limit)
             else:
                 arrays, info = _gmsh_session(make, source, cad)
-        except GeometryError as e:
-            error = (isinstance(e, MeshTimeLimit), str(e))
+        except GeometryError as e:  # its class too (MeshTimeLimit, TooManyTriangles)
+            error = type(e)(str(e))
     error = comm.bcast(error, root=root)
     if error is not None:
-        raise (MeshTimeLimit if error[0] else GeometryError)(error[1])
+        raise error
     info = comm.bcast(info, root=root)
     return _distribute(comm, arrays, info, source)
 
@@ -191,10 +191,10 @@ def _in_child(work, source: str, limit: float):
             _die_with(parent)
             try:
                 result = ("ok", work())
-            except GeometryError as e:
-                result = ("error", str(e))
+            except GeometryError as e:  # sent with its class
+                result = ("error", type(e)(str(e)))
             except BaseException as e:
-                result = ("error", f"Gmsh failed: {one_line(e)}")
+                result = ("error", GeometryError(f"Gmsh failed: {one_line(e)}"))
             with os.fdopen(write_end, "wb") as pipe:
                 pickle.dump(result, pipe, protocol=pickle.HIGHEST_PROTOCOL)
             status = 0
@@ -236,7 +236,7 @@ def _in_child(work, source: str, limit: float):
                if os.WIFSIGNALED(status) else f"exit status {os.waitstatus_to_exitcode(status)}")
         raise GeometryError(f"Gmsh crashed on {source!r} ({why})") from None
     if kind == "error":
-        raise GeometryError(value)
+        raise value
     return value
 
 

@@ -30,6 +30,10 @@ class MeshTimeLimit(GeometryError):
     """Reading and meshing a geometry file took longer than its time limit."""
 
 
+class TooManyTriangles(GeometryError):
+    """The mesh size asked for would give more triangles than the limit."""
+
+
 @dataclass(frozen=True)
 class Corner:
     """A corner of the boundary: position, interior angle (radians) and its quarter

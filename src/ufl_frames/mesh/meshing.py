@@ -5,10 +5,11 @@ file's requests for quadrilaterals, second order or MeshAdapt (triangles are wha
 frame field needs), resolves curved boundaries with at least
 :data:`CURVE_POINTS_PER_TURN` points per full turn, and sizes the mesh: the file's own
 sizes where it sets any and no size is given, else an absolute size or about
-:data:`AUTO_TRIANGLES` triangles; an estimate above ``max_triangles`` is refused before
-meshing, and a large uniform mesh is made by refining a coarser one
-(:data:`REFINE_ABOVE`). :func:`check_crossings` refuses, before meshing, boundaries
-whose curves cross (Gmsh's meshing never ends on them).
+:data:`AUTO_TRIANGLES` triangles; without an absolute size, the sizes are capped where
+the shape is thin or tightly curved (:mod:`ufl_frames.mesh.feature_size`); an estimate
+above ``max_triangles`` is refused before meshing, and a large uniform mesh is made by
+refining a coarser one (:data:`REFINE_ABOVE`). :func:`check_crossings` refuses, before
+meshing, boundaries whose curves cross (Gmsh's meshing never ends on them).
 """
 
 import math
@@ -21,8 +22,9 @@ init_petsc()
 import gmsh  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ufl_frames.mesh import feature_size  # noqa: E402
 from ufl_frames.mesh.arrays import signed_areas, triangles_of_model  # noqa: E402
-from ufl_frames.mesh.domain import GeometryError  # noqa: E402
+from ufl_frames.mesh.domain import GeometryError, TooManyTriangles  # noqa: E402
 
 #: Triangles aimed at by the default size of a file that sets no sizes of its own.
 AUTO_TRIANGLES = 2000
@@ -240,6 +242,17 @@ def _file_sets_sizes() -> bool:
     )
 
 
+def _largest_file_size(automatic: float) -> float:
+    """The size a file that sets its own sizes is compared with for the local feature
+    size: the larger of the automatic size and its largest point size, at most its
+    ``Mesh.MeshSizeMax``."""
+    points = gmsh.model.getEntities(0)
+    sizes = np.asarray(gmsh.model.mesh.getSizes(points)) if points else np.zeros(0)
+    sizes = sizes[(sizes > 0) & (sizes < _UNSET_SIZE)]
+    largest = max(automatic, float(sizes.max()) if sizes.size else 0.0)
+    return min(largest, gmsh.option.getNumber("Mesh.MeshSizeMax"))
+
+
 def _bounding_box_diagonal() -> float:
     x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(-1, -1)
     return math.hypot(x1 - x0, y1 - y0)
@@ -373,18 +386,26 @@ def mesh_model(sizing: Sizing, notes: list[str]) -> float | None:
     if not (area > 0 and math.isfinite(area)):
         raise GeometryError(f"the surfaces have no area to mesh (area {area:.3g})")
     refinements, automatic = sizing.refinements, 0
+    automatic_size = math.sqrt(area / (_EQUILATERAL * AUTO_TRIANGLES))
     if own_sizes:
         h = None
-        gmsh.option.setNumber("Mesh.MeshSizeFactor", gmsh.option.getNumber("Mesh.MeshSizeFactor")
-                              * sizing.factor * 2**refinements)
+        file_factor = gmsh.option.getNumber("Mesh.MeshSizeFactor")
+        gmsh.option.setNumber("Mesh.MeshSizeFactor", file_factor * sizing.factor * 2**refinements)
+        # Gmsh multiplies the callback's size by the factor too: the caps scale with
+        # --size-factor and the refinements, not with the file's own factor.
+        field = feature_size.measure(_largest_file_size(automatic_size))[0]
+        feature_size.install(field, 1.0 / file_factor, notes)
     else:
         if sizing.h is None:
-            h = sizing.factor * math.sqrt(area / (_EQUILATERAL * AUTO_TRIANGLES))
+            h = sizing.factor * automatic_size
         else:
             h = sizing.h * sizing.factor
         estimate = area / (_EQUILATERAL * h * h)
+        if sizing.h is None:  # the default size resolves the shape; an explicit one is kept
+            field, caps, step = feature_size.measure(automatic_size)
+            estimate += feature_size.extra_triangles(sizing.factor * caps, step, h)
         if estimate > sizing.max_triangles:
-            raise GeometryError(
+            raise TooManyTriangles(
                 f"mesh size {h:.3g} on a domain of area {area:.3g} gives about "
                 f"{estimate:.2g} triangles, more than the limit {sizing.max_triangles:.3g}: "
                 "choose a larger mesh size (or raise the limit)"
@@ -392,7 +413,12 @@ def mesh_model(sizing: Sizing, notes: list[str]) -> float | None:
         while estimate / 4**(refinements + automatic) > REFINE_ABOVE:
             automatic += 1
         gmsh.option.setNumber("Mesh.MeshSizeMax", h * 2**(refinements + automatic))
-    gmsh.model.mesh.generate(2)
+        if sizing.h is None:
+            feature_size.install(field, sizing.factor * 2**(refinements + automatic), notes)
+    try:
+        gmsh.model.mesh.generate(2)
+    finally:
+        feature_size.uninstall()
     for _ in range(refinements + automatic):
         gmsh.model.mesh.refine()
     if automatic:
