@@ -234,10 +234,34 @@ def _euler(mesh) -> int:
 SMALLER_SIZES = (0.7, 0.5)
 
 
+def _bend_advice(mesh, size: float) -> str | None:
+    """Where the boundary bends more tightly than quads of ``size`` can follow
+    (:func:`~ufl_frames.param.bends.bend_size`, the model's required points as corners),
+    which uniform size would follow it, and about how many quads that is; else None."""
+    from ufl_frames.param.bends import bend_size
+
+    corners = None if mesh.features is None else mesh.features.required_points
+    bend = bend_size(mesh.x, mesh.cells, corners)
+    if not size > bend.size:
+        return None
+    digits = 1 - math.floor(math.log10(bend.size))  # two significant digits, rounded down
+    fits = math.floor(bend.size * 10**digits) / 10**digits
+    x = mesh.x[mesh.cells]
+    area = 0.5 * float(np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
+                              - (x[:, 1, 1] - x[:, 0, 1]) * (x[:, 2, 0] - x[:, 0, 0])).sum())
+    return (f"the boundary bends with a radius of {bend.radius:.2g} near "
+            f"({bend.at[0]:.3g}, {bend.at[1]:.3g}), too tightly for quads of size {size:.3g}: "
+            f"uniform quads of size {fits:.2g} or less follow it (about "
+            f"{float(f'{area / fits**2:.2g}'):.0f} quads), or quads graded towards it (--size file or "
+            "an expression)")
+
+
 def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
     """:func:`_quad_mesh`; where it fails, the error says which smaller quad size (of
-    :data:`SMALLER_SIZES`) gives a valid mesh, or that none of them does; with ``adapt``
-    that mesh is returned instead (its measures' ``adapted_size`` says so)."""
+    :data:`SMALLER_SIZES`) gives a valid mesh, or, where none does and the boundary bends
+    too tightly for the quads (:func:`_bend_advice`), which size follows the bend, or that
+    none of them does; with ``adapt`` that mesh is returned instead (its measures'
+    ``adapted_size`` says so)."""
     try:
         return _quad_mesh(mesh, size)
     except ValueError as e:
@@ -253,8 +277,11 @@ def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
             quality["adapted_size"] = {"asked": size, "used": share * size, "why": failure}
             return quad_mesh, quality
         raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
-    raise ValueError(f"{failure} (quad sizes {', '.join(f'{f * size:.3g}' for f in SMALLER_SIZES)} "
-                     "fail too)")
+    tried = ", ".join(f"{f * size:.3g}" for f in SMALLER_SIZES)
+    bend = _bend_advice(mesh, size)
+    if bend is not None:
+        raise ValueError(f"{failure} (quad sizes {tried} fail too on these triangles; {bend})")
+    raise ValueError(f"{failure} (quad sizes {tried} fail too)")
 
 
 def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
