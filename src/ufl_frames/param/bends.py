@@ -101,7 +101,6 @@ def _worst_arc(rest: np.ndarray, length: np.ndarray, w: float) -> tuple[float, i
     it (so that a polygon inscribed in a circle of radius R bends by 1/R per unit length,
     however fine); the bend of the arc [a, a + w] is then piecewise linear in a, largest
     where a or a + w is an edge's midpoint."""
-    k = rest.size
     total = float(length.sum())
     if w >= total:  # the arc is the whole loop
         return abs(float(rest.sum())), int(np.argmax(np.abs(rest)))

@@ -252,8 +252,8 @@ def _bend_advice(mesh, size: float) -> str | None:
     return (f"the boundary bends with a radius of {bend.radius:.2g} near "
             f"({bend.at[0]:.3g}, {bend.at[1]:.3g}), too tightly for quads of size {size:.3g}: "
             f"uniform quads of size {fits:.2g} or less follow it (about "
-            f"{float(f'{area / fits**2:.2g}'):.0f} quads), or quads graded towards it (--size file or "
-            "an expression)")
+            f"{float(f'{area / fits**2:.2g}'):.0f} quads), or quads graded towards it "
+            "(--size file or an expression)")
 
 
 def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
