@@ -235,25 +235,40 @@ SMALLER_SIZES = (0.7, 0.5)
 
 
 def _bend_advice(mesh, size: float) -> str | None:
-    """Where the boundary bends more tightly than quads of ``size`` can follow
-    (:func:`~ufl_frames.param.bends.bend_size`, the model's required points as corners),
-    which uniform size would follow it, and about how many quads that is; else None."""
+    """Where the boundary bends more tightly than the quads there can follow
+    (:func:`~ufl_frames.param.bends.bend_size`, the model's required points as corners):
+    the field's quad edge at the bend (the mean of (l1 + l2)/2s over the triangles within
+    one bend size of it, s the scale of quad size ``size``) is longer than the bend
+    allows. Then: which quad size (the asked one shrunk by as much) would follow it, and
+    about how many quads that is; else None (a graded field whose quads are small enough
+    there, or no tight bend)."""
+    from ufl_frames.param import seamless
     from ufl_frames.param.bends import bend_size
 
     corners = None if mesh.features is None else mesh.features.required_points
     bend = bend_size(mesh.x, mesh.cells, corners)
-    if not size > bend.size:
+    if not np.isfinite(bend.size):
         return None
-    digits = 1 - math.floor(math.log10(bend.size))  # two significant digits, rounded down
-    fits = math.floor(bend.size * 10**digits) / 10**digits
     x = mesh.x[mesh.cells]
+    centroids = x.mean(axis=1)[:, :2]
+    near = np.linalg.norm(centroids - bend.at, axis=1) <= bend.size
+    if not near.any():
+        near = np.linalg.norm(centroids - bend.at, axis=1) == \
+            np.linalg.norm(centroids - bend.at, axis=1).min()
+    scale = seamless.scale_for_quad_size(mesh, size)
+    there = float(np.mean(0.5 * (mesh.l1[near] + mesh.l2[near]))) / scale
+    if not there > bend.size:
+        return None
+    wanted = size * bend.size / there
+    digits = 1 - math.floor(math.log10(wanted))  # two significant digits, rounded down
+    fits = math.floor(wanted * 10**digits) / 10**digits
     area = 0.5 * float(np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
                               - (x[:, 1, 1] - x[:, 0, 1]) * (x[:, 2, 0] - x[:, 0, 0])).sum())
     return (f"the boundary bends with a radius of {bend.radius:.2g} near "
-            f"({bend.at[0]:.3g}, {bend.at[1]:.3g}), too tightly for quads of size {size:.3g}: "
-            f"uniform quads of size {fits:.2g} or less follow it (about "
-            f"{float(f'{area / fits**2:.2g}'):.0f} quads), or quads graded towards it "
-            "(--size file or an expression)")
+            f"({bend.at[0]:.3g}, {bend.at[1]:.3g}), too tightly for the quads there "
+            f"({there:.2g} long at quad size {size:.3g}): quad size {fits:.2g} or less "
+            f"follows it (about {float(f'{area / fits**2:.2g}'):.0f} quads), or quads "
+            "graded towards it (--size file or an expression)")
 
 
 def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
