@@ -234,14 +234,18 @@ def _euler(mesh) -> int:
 SMALLER_SIZES = (0.7, 0.5)
 
 
-def _bend_advice(mesh, size: float) -> str | None:
+def _bend_advice(mesh, size: float, failed=()) -> str | None:
     """Where the boundary bends more tightly than the quads there can follow
     (:func:`~ufl_frames.param.bends.bend_size`, the model's required points as corners):
     the field's quad edge at the bend (the mean of (l1 + l2)/2s over the triangles within
     one bend size of it, s the scale of quad size ``size``) is longer than the bend
     allows. Then: which quad size (the asked one shrunk by as much) would follow it, and
     about how many quads that is; else None (a graded field whose quads are small enough
-    there, or no tight bend)."""
+    there, or no tight bend, or a size of ``failed`` (tried and failed on these
+    triangles) at most that size on triangles fine enough for it: at least
+    :data:`~ufl_frames.mesh.sizes.TRIANGLES_PER_QUAD_EDGE` mean triangle edges a quad
+    edge — then the bend is not what fails)."""
+    from ufl_frames.mesh.sizes import TRIANGLES_PER_QUAD_EDGE
     from ufl_frames.param import seamless
     from ufl_frames.param.bends import bend_size
 
@@ -262,6 +266,10 @@ def _bend_advice(mesh, size: float) -> str | None:
     wanted = size * bend.size / there
     digits = 1 - math.floor(math.log10(wanted))  # two significant digits, rounded down
     fits = math.floor(wanted * 10**digits) / 10**digits
+    edge = float(np.linalg.norm(mesh.x[mesh.edges[:, 1]] - mesh.x[mesh.edges[:, 0]],
+                                axis=1).mean())
+    if any(tried <= fits and tried >= TRIANGLES_PER_QUAD_EDGE * edge for tried in failed):
+        return None
     area = 0.5 * float(np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
                               - (x[:, 1, 1] - x[:, 0, 1]) * (x[:, 2, 0] - x[:, 0, 0])).sum())
     return (f"the boundary bends with a radius of {bend.radius:.2g} near "
@@ -293,7 +301,7 @@ def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
             return quad_mesh, quality
         raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
     tried = ", ".join(f"{f * size:.3g}" for f in SMALLER_SIZES)
-    bend = _bend_advice(mesh, size)
+    bend = _bend_advice(mesh, size, failed=[share * size for share in SMALLER_SIZES])
     if bend is not None:
         raise ValueError(f"{failure} (quad sizes {tried} fail too on these triangles; {bend})")
     raise ValueError(f"{failure} (quad sizes {tried} fail too)")
