@@ -10,14 +10,20 @@ For each target number of quads N the shape is meshed with about ``--triangles-p
 (:class:`ufl_frames.pipeline.stages.RootField`). Then, on that cut mesh, each stage is
 timed on its own:
 
-* ``cut``: :func:`ufl_frames.param.cut.cut_mesh` (the cut graph, the combing);
+* ``cut``: :func:`ufl_frames.param.cut.cut_mesh` (the cut graph, the combing) with the
+  model's features (regions, curves, the points that must be quad vertices, the smooth
+  joints), as the CLI cuts (``--no-features``: the bare mesh, as this script did before
+  2026-12-07's second session);
 * ``integrate``: the seamless map (:func:`ufl_frames.param.seamless.integrate`);
 * ``layout``: the motorcycle graph and its patches (:func:`ufl_frames.quads.layout.layout`,
   with :func:`~ufl_frames.quads.layout.untangle` first where the map folds);
 * ``lengths``: the integer program (:func:`ufl_frames.quads.patches.integer_lengths`);
-* ``quads``: the patches' grids mapped back (:func:`ufl_frames.quads.patches.patch_quads`);
+* ``quads``: the patches' grids mapped back (:func:`ufl_frames.quads.patches.patch_quads`)
+  and their regions, curve edges and model points found
+  (:func:`ufl_frames.quads.extract.with_features`);
 * ``improve`` and ``check``: :func:`ufl_frames.quads.improve.improve_worst_quads` and the
-  checks of the stage;
+  checks of the stage (with the features: quads in their region, model points quad
+  vertices, curve lengths kept; ``problem`` gives the first failed check);
 * ``greedy``: the older path, greedy rounding and iso-line extraction
   (:func:`ufl_frames.param.quantise.quantise` + :func:`ufl_frames.quads.extract.extract_quads`),
   in a child process stopped after ``--greedy-timeout`` seconds.
@@ -65,7 +71,8 @@ def greedy(mesh, scale, timeout: float) -> tuple:
     return queue.get() if not queue.empty() else (None, None, "the child died")
 
 
-def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -> dict:
+def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float,
+            features: bool = True) -> dict:
     """One row: every stage of the quad mesh of ``shape`` at about ``quads`` quads."""
     import numpy as np
     from mpi4py import MPI
@@ -76,6 +83,7 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -
     from ufl_frames.pipeline import FrameField
     from ufl_frames.pipeline.stages import RootField, _improved, _problems
     from ufl_frames.quads import layout, measures, patches
+    from ufl_frames.quads.extract import with_features
 
     comm = MPI.COMM_SELF
     probe = load(comm, shape)  # the shape's own default mesh: its area and mean edge
@@ -91,7 +99,7 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -
            "mean edge": mean_cell_edge(domain.mesh)}
     root = RootField(field)
     t = time.perf_counter()
-    mesh = cut.cut_mesh(*root._arrays)
+    mesh = cut.cut_mesh(*root._arrays, features=root.features if features else None)
     row["cut s"] = time.perf_counter() - t
     scale = seamless.scale_for_quad_size(mesh, quad_size)
     t = time.perf_counter()
@@ -108,6 +116,7 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -
     row["lengths s"] = time.perf_counter() - t
     t = time.perf_counter()
     quad_mesh, _ = patches.patch_quads(lay, n)
+    quad_mesh = with_features(quad_mesh, param.mesh)  # as patches.quads_of_map does
     row["quads s"] = time.perf_counter() - t
     t = time.perf_counter()
     quad_mesh, _ = _improved(quad_mesh)
@@ -118,6 +127,7 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float) -
     quality = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
     row.update({"quads": quality["quads"], "irregular": quality["irregular_vertices"],
                 "min SJ": quality["min_sj"], "valid": not problems,
+                "problem": problems[0] if problems else "",
                 "patches": len(lay.patches), "arcs": len(lay.arcs),
                 "collapsed": int(np.count_nonzero(np.asarray(n) == 0)),
                 "folded before": folds})
@@ -139,7 +149,8 @@ def _areas(mesh):
                   - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0]))
 
 
-COLUMNS = ("target quads", "triangles", "quads", "irregular", "min SJ", "valid", "patches",
+COLUMNS = ("target quads", "triangles", "quads", "irregular", "min SJ", "valid", "problem",
+           "patches",
            "arcs", "collapsed", "folded before", "cut s", "integrate s", "layout s",
            "lengths s", "quads s", "improve s", "check s", "quad stage s", "greedy s",
            "greedy", "field s", "peak MB")
@@ -163,6 +174,8 @@ def main() -> None:
     parser.add_argument("--quads", type=float, nargs="+", default=[1e3, 1e4, 1e5])
     parser.add_argument("--triangles-per-quad", type=float, default=4.0)
     parser.add_argument("--greedy-timeout", type=float, default=600.0)
+    parser.add_argument("--no-features", action="store_true",
+                        help="cut the bare mesh (no regions, curves, points), not the CLI's")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     from ufl_frames.bootstrap import init_petsc
@@ -171,7 +184,8 @@ def main() -> None:
     rows = []
     for n in args.quads:
         print(f"{args.shape.name}: {n:.0f} quads ...", flush=True)
-        rows.append(measure(args.shape, n, args.triangles_per_quad, args.greedy_timeout))
+        rows.append(measure(args.shape, n, args.triangles_per_quad, args.greedy_timeout,
+                            features=not args.no_features))
     print(table(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))

@@ -21,9 +21,13 @@ Methods (``--methods``, default all but ``simple`` and ``delaunay``):
 * ``ufl_frames``: ``ufl-frames solve SHAPE --quads --quad-size S --out DIR --force -q``
   (general frames, the CLI's default), ``ufl_frames_iso`` the same with ``--isotropic``,
   ``ufl_frames_conf`` with ``--conformal`` (the conformal isotropic field, no TAO),
-  in a subprocess (``--mesh-size H`` passed on when given); its ``summary.json`` object
-  ``"quads"`` (the keys of :func:`ufl_frames.quads.measures.quad_quality` plus ``valid``
-  and ``seconds``) is reported, and ``DIR/quads.msh`` is measured again here. A run that
+  ``ufl_frames_sized`` is ``ufl-frames mesh SHAPE --size file --quads N`` (the sized
+  non-isotropic field: quads graded as the file's own point sizes ask, as Gmsh's; N the
+  target; ``--mesh-size`` not passed on), each in a subprocess (``--mesh-size H`` passed
+  on when given to the others); its ``summary.json`` object ``"quads"`` (the keys of
+  :func:`ufl_frames.quads.measures.quad_quality` plus ``valid`` and ``seconds``) is
+  reported with the run's seconds per step (``stage_seconds``: mesh,
+  field, report, param and quads), and ``DIR/quads.msh`` is measured again here. A run that
   fails (the option not there yet, say) shows "not available" and its one-line error.
 
 Size: the target is ``--quads`` quads (default 400), or area / S² with ``--quad-size S``;
@@ -77,7 +81,9 @@ GMSH_METHODS = {
 }
 #: ufl_frames' two fields: general (non-isotropic, the CLI's default) and isotropic frames.
 UFL_FRAMES_METHODS = {"ufl_frames": [], "ufl_frames_iso": ["--isotropic"],
-                      "ufl_frames_conf": ["--conformal"]}
+                      "ufl_frames_conf": ["--conformal"], "ufl_frames_sized": None}
+#: ``ufl-frames mesh`` with the file's own sizes: the quads graded as the file asks.
+SIZED_METHOD = "ufl_frames_sized"
 DEFAULT_METHODS = ("qs", "blossom", "fullquad", "ufl_frames", "ufl_frames_iso",
                    "ufl_frames_conf")
 ALL_METHODS = (*GMSH_METHODS, *UFL_FRAMES_METHODS)
@@ -311,9 +317,13 @@ def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
     row = {"method": method, "quad_size": quad_size}
     with tempfile.TemporaryDirectory(prefix="quads_") as tmp:
         folder = Path(tmp) / "run"
-        cmd = [*base, "solve", argument, *UFL_FRAMES_METHODS[method], "--quads",
-               "--quad-size", repr(quad_size), "--out", str(folder), "--force", "-q"]
-        if args.mesh_size:
+        if method == SIZED_METHOD:  # the count, graded by the file's sizes
+            cmd = [*base, "mesh", argument, "--size", "file", "--quads",
+                   str(round(area / quad_size**2)), "--out", str(folder), "--force", "-q"]
+        else:
+            cmd = [*base, "solve", argument, *UFL_FRAMES_METHODS[method], "--quads",
+                   "--quad-size", repr(quad_size), "--out", str(folder), "--force", "-q"]
+        if args.mesh_size and method != SIZED_METHOD:
             cmd += ["--mesh-size", repr(args.mesh_size)]
         rc, _, err, wall = _run(cmd, args.timeout)
         row["command"] = " ".join(cmd)
@@ -332,7 +342,9 @@ def run_ufl_frames(argument: str, quad_size: float, area: float | None, args,
         if isinstance(seconds, dict):  # per step: quantise, extract, ...
             seconds = sum(v for v in seconds.values() if isinstance(v, int | float))
         row.update(status="ok", reported=reported, seconds=seconds, total_s=wall,
-                   valid_reported=reported.get("valid"))
+                   valid_reported=reported.get("valid"),
+                   stage_seconds=summary.get("stage_seconds"),
+                   field_triangles=summary.get("num_cells"))
         try:
             x, q = _msh_quads(folder / "quads.msh")
         except Exception as e:  # reported, not raised
@@ -391,6 +403,9 @@ def format_row(row: dict) -> str:
             f"{m['irregular_vertices']:>6}{split:>10}{m['min_sj']:>7.3f}{m['mean_sj']:>7.3f}"
             f"{m['sj_at_least_0_8']:>7.2f}{ratio['mean']:>6.2f}{ratio['max']:>6.1f}{area}"
             f"{'yes' if row['valid'] else 'NO':>6}{time_s}")
+    if row.get("stage_seconds"):
+        text += "\n      stages: " + ", ".join(f"{k} {v:.2f} s"
+                                              for k, v in row["stage_seconds"].items())
     if row.get("problems"):
         text += "\n" + "\n".join(f"      ! {p}" for p in row["problems"])
     if row.get("summary_mismatch"):

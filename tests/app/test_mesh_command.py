@@ -73,6 +73,11 @@ def test_files_and_summary(disk_run):
     assert summary["files"] == ["quads.msh", "quads.vtu", "quads.png", "summary.json"]
     assert summary["isotropic"] and summary["quads"]["valid"]
     assert summary["quads"]["min_sj"] > 0.3
+    # the run's seconds per step: each positive, together within the whole run's time
+    steps = summary["stage_seconds"]
+    assert list(steps) == ["mesh", "field", "report", "param and quads"]
+    assert all(v > 0 for v in steps.values())
+    assert sum(steps.values()) <= summary["total_time_s"]
 
 
 def test_boundary_nodes_on_the_circle(disk_run):

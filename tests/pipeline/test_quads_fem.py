@@ -9,8 +9,10 @@ COMM_SELF and COMM_WORLD give the same mesh. The files read back with Gmsh and D
 """
 
 import json
+import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mpi4py import MPI
 
@@ -176,3 +178,44 @@ def test_where_the_layout_cannot_be_made_greedy_rounding_makes_the_quads(monkeyp
     with pytest.raises(ValueError, match="layout: a face turns.*greedy rounding: the "
                        "integer-grid map folds; take a smaller quad size"):
         quadrangulate(field, 0.1)
+
+
+# a 4 × 3 box with a drop-shaped hole: a round nose of radius 0.05 at the origin, straight
+# sides tangent to it meeting at a sharp tail at (1, 0)
+_R, _PHI = 0.05, float(np.arccos(0.05))
+_C, _S = float(_R * np.cos(_PHI)), float(_R * np.sin(_PHI))
+DROP = f"""Point(1) = {{0, 0, 0}};
+Point(2) = {{{_C!r}, {_S!r}, 0}}; Point(3) = {{-{_R}, 0, 0}};
+Point(4) = {{{_C!r}, {-_S!r}, 0}}; Point(5) = {{1, 0, 0}};
+Circle(1) = {{2, 1, 3}}; Circle(2) = {{3, 1, 4}}; Line(3) = {{4, 5}}; Line(4) = {{5, 2}};
+Curve Loop(1) = {{1, 2, 3, 4}};
+Point(6) = {{-1.5, -1.5, 0}}; Point(7) = {{2.5, -1.5, 0}}; Point(8) = {{2.5, 1.5, 0}};
+Point(9) = {{-1.5, 1.5, 0}};
+Line(5) = {{6, 7}}; Line(6) = {{7, 8}}; Line(7) = {{8, 9}}; Line(8) = {{9, 6}};
+Curve Loop(2) = {{5, 6, 7, 8}}; Plane Surface(1) = {{2, 1}};
+"""
+
+
+def test_a_round_end_tighter_than_the_quads_is_named_with_the_size_that_follows_it(tmp_path):
+    """Uniform quads of size 0.2 cannot follow a nose of radius 0.05 (their edges chord
+    across it): the refusal names the bend (its radius, where) and the largest quad size
+    that follows it (about 2 × the radius, rounded down), and quads of that size, on
+    triangles of that size (as ``ufl-frames mesh --quad-size`` makes them), are valid."""
+    from ufl_frames.mesh import load
+
+    path = Path(COMM.bcast(str(tmp_path), root=0)) / "drop.geo"
+    if COMM.rank == 0:
+        path.write_text(DROP)
+    COMM.barrier()
+    field = FrameField.initial(load(COMM, path, 0.2), isotropic=True).conformal()
+    with pytest.raises(ValueError, match=r"the boundary bends with a radius of 0\.0(49|5) "
+                       r"near \(-0\.0\d*, [-\d.e]+\), too tightly for the quads there "
+                       r"\([\d.]+ long at quad size 0\.2\): quad size 0\.\d+ or less "
+                       r"follows it") as refused:
+        quadrangulate(field, 0.2)
+    named = float(re.search(r"quad size (0\.\d+) or less",
+                            str(refused.value)).group(1))
+    assert 0.09 <= named <= 0.1
+    field = FrameField.initial(load(COMM, path, named), isotropic=True).conformal()
+    quads = quadrangulate(field, named)
+    assert quads.quality["valid"] and quads.quality["min_sj"] >= 0.3

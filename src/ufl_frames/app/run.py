@@ -589,6 +589,7 @@ def run(config: RunConfig, comm=None) -> dict:
                              "triangles are no larger than the quads: choose a larger "
                              "--quad-size, or set --mesh-size)") from e
         raise
+    meshed = time.perf_counter()
     domain = domains[-1]
     _check_sizes(config, domain, comm)
     interrupts.set_stage("the MBO initial field")
@@ -605,9 +606,16 @@ def run(config: RunConfig, comm=None) -> dict:
     interrupts.note_checkpoint(out if saved is not None else None)
     try:
         solve = _Solve(config, comm, say, out, store, saved, target)
+        solve.seconds["mesh"] = meshed - start  # with reading the geometry and checks
+        begun = time.perf_counter()
         solve.solve(domains)
+        solve.seconds["field"] = time.perf_counter() - begun
+        begun = time.perf_counter()
         solve.report()
+        solve.seconds["report"] = time.perf_counter() - begun
+        begun = time.perf_counter()
         solve.stages()
+        solve.seconds["param and quads"] = time.perf_counter() - begun
         summary = solve.write(start, petsc_options)
     except KeyboardInterrupt:  # Interrupted too: the checkpoint, if any, is for --resume
         raise
@@ -707,6 +715,7 @@ class _Solve:
         self.size_target = target  # the solve's SizeTarget (None: H alone)
         self.missing: dict[str, str] = {}  # what was asked for and is not written: why
         self.skipped: list[tuple[str, str]] = []  # figures that could not be drawn
+        self.seconds: dict[str, float] = {}  # wall seconds per step of the run (rank 0's)
         self._finest_space = None
         self._levels = 1
 
@@ -1110,5 +1119,6 @@ class _Solve:
             "missing": {**self.missing, **{name: f"could not be drawn: {reason}"
                                            for name, reason in self.skipped}},
             "total_time_s": comm.allreduce(time.perf_counter() - start, op=MPI.MAX),
+            "stage_seconds": comm.bcast(dict(self.seconds), root=0),
             "files": files,
         }

@@ -260,10 +260,57 @@ def _euler(mesh) -> int:
 SMALLER_SIZES = (0.7, 0.5)
 
 
+def _bend_advice(mesh, size: float, failed=()) -> str | None:
+    """Where the boundary bends more tightly than the quads there can follow
+    (:func:`~ufl_frames.param.bends.bend_size`, the model's required points as corners):
+    the field's quad edge at the bend (the mean of (l1 + l2)/2s over the triangles within
+    one bend size of it, s the scale of quad size ``size``) is longer than the bend
+    allows. Then: which quad size (the asked one shrunk by as much) would follow it, and
+    about how many quads that is; else None (a graded field whose quads are small enough
+    there, or no tight bend, or a size of ``failed`` (tried and failed on these
+    triangles) at most that size on triangles fine enough for it: at least
+    :data:`~ufl_frames.mesh.sizes.TRIANGLES_PER_QUAD_EDGE` mean triangle edges a quad
+    edge — then the bend is not what fails)."""
+    from ufl_frames.mesh.sizes import TRIANGLES_PER_QUAD_EDGE
+    from ufl_frames.param import seamless
+    from ufl_frames.param.bends import bend_size
+
+    corners = None if mesh.features is None else mesh.features.required_points
+    bend = bend_size(mesh.x, mesh.cells, corners)
+    if not np.isfinite(bend.size):
+        return None
+    x = mesh.x[mesh.cells]
+    centroids = x.mean(axis=1)[:, :2]
+    near = np.linalg.norm(centroids - bend.at, axis=1) <= bend.size
+    if not near.any():
+        near = np.linalg.norm(centroids - bend.at, axis=1) == \
+            np.linalg.norm(centroids - bend.at, axis=1).min()
+    scale = seamless.scale_for_quad_size(mesh, size)
+    there = float(np.mean(0.5 * (mesh.l1[near] + mesh.l2[near]))) / scale
+    if not there > bend.size:
+        return None
+    wanted = size * bend.size / there
+    digits = 1 - math.floor(math.log10(wanted))  # two significant digits, rounded down
+    fits = math.floor(wanted * 10**digits) / 10**digits
+    edge = float(np.linalg.norm(mesh.x[mesh.edges[:, 1]] - mesh.x[mesh.edges[:, 0]],
+                                axis=1).mean())
+    if any(tried <= fits and tried >= TRIANGLES_PER_QUAD_EDGE * edge for tried in failed):
+        return None
+    area = 0.5 * float(np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
+                              - (x[:, 1, 1] - x[:, 0, 1]) * (x[:, 2, 0] - x[:, 0, 0])).sum())
+    return (f"the boundary bends with a radius of {bend.radius:.2g} near "
+            f"({bend.at[0]:.3g}, {bend.at[1]:.3g}), too tightly for the quads there "
+            f"({there:.2g} long at quad size {size:.3g}): quad size {fits:.2g} or less "
+            f"follows it (about {float(f'{area / fits**2:.2g}'):.0f} quads), or quads "
+            "graded towards it (--size file or an expression)")
+
+
 def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
     """:func:`_quad_mesh`; where it fails, the error says which smaller quad size (of
-    :data:`SMALLER_SIZES`) gives a valid mesh, or that none of them does; with ``adapt``
-    that mesh is returned instead (its measures' ``adapted_size`` says so)."""
+    :data:`SMALLER_SIZES`) gives a valid mesh, or, where none does and the boundary bends
+    too tightly for the quads (:func:`_bend_advice`), which size follows the bend, or that
+    none of them does; with ``adapt`` that mesh is returned instead (its measures'
+    ``adapted_size`` says so)."""
     try:
         return _quad_mesh(mesh, size)
     except ValueError as e:
@@ -279,8 +326,11 @@ def _quad_mesh_or_advice(mesh, size: float, adapt: bool = False):
             quality["adapted_size"] = {"asked": size, "used": share * size, "why": failure}
             return quad_mesh, quality
         raise ValueError(f"{failure} (quad size {share * size:.3g} works)")
-    raise ValueError(f"{failure} (quad sizes {', '.join(f'{f * size:.3g}' for f in SMALLER_SIZES)} "
-                     "fail too)")
+    tried = ", ".join(f"{f * size:.3g}" for f in SMALLER_SIZES)
+    bend = _bend_advice(mesh, size, failed=[share * size for share in SMALLER_SIZES])
+    if bend is not None:
+        raise ValueError(f"{failure} (quad sizes {tried} fail too on these triangles; {bend})")
+    raise ValueError(f"{failure} (quad sizes {tried} fail too)")
 
 
 def _quad_mesh(mesh, size: float, methods=("layout", "greedy rounding")):
