@@ -136,6 +136,39 @@ def test_discrete_index_theorem():
     assert winding == pytest.approx(0.5)
 
 
+def test_step_of_exactly_pi_counts_once():
+    """Two triangles of the unit square whose shared diagonal carries a step of exactly π
+    (θ4 = 0 at (0, 0), π at (1, 1)): the boundary turns θ4 by 4 × π/2 = 2π, index 1/4,
+    and the two triangles together give 1/4 (not 1/2: +π on both sides of the diagonal),
+    the same triangle getting it whatever the vertices' numbering."""
+    coords = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    theta4 = np.array([0.0, np.pi / 2, np.pi, 3 * np.pi / 2])
+    cells = np.array([[0, 1, 2], [0, 2, 3]])
+    index = triangle_indices(cells, q_from_theta4(theta4), coords)
+    assert index.sum() == 0.25
+    for perm in ([3, 2, 1, 0], [2, 0, 3, 1], [1, 3, 0, 2]):
+        new = np.empty(4, dtype=int)
+        new[perm] = np.arange(4)  # vertex v is renumbered new[v]
+        renumbered = triangle_indices(new[cells], q_from_theta4(theta4[perm]), coords[perm])
+        assert renumbered.tolist() == index.tolist()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_index_theorem_with_many_steps_of_pi(seed):
+    """θ4 a random multiple of π/2 inside, 0 on the boundary (whose winding is then 0):
+    many edges carry steps of exactly ±π, and the triangles still sum to 0."""
+    n = 8
+    cells, coords = grid(n, jitter=0.2, seed=seed)
+    boundary = (coords == 0).any(axis=1) | (coords == 1).any(axis=1)
+    rng = np.random.default_rng(seed)
+    theta4 = np.where(boundary, 0.0, np.pi / 2 * rng.integers(0, 4, size=coords.shape[0]))
+    edges = np.concatenate([cells[:, [0, 1]], cells[:, [1, 2]], cells[:, [2, 0]]])
+    assert np.sum(np.isclose(np.abs(np.diff(theta4[edges], axis=1)), np.pi)) > 20
+    index = triangle_indices(cells, q_from_theta4(theta4), coords)
+    assert index.sum() == 0.0
+    assert np.count_nonzero(index) > 0  # the field is singular, its indices cancel
+
+
 def test_input_checks():
     cells, coords = grid(2)
     q = q_from_theta4(np.zeros(coords.shape[0]))

@@ -9,8 +9,11 @@ the fourfold symmetry of a cross. The index of a triangle is the winding of
            \qquad w(\delta) \in (-\pi, \pi],
 
 counted counter-clockwise, so a multiple of 1/4: a +1/4 singularity is one where
-the cross turns by +90° around a small loop. The sum over all triangles equals the
-winding of θ₄ along the mesh boundary (a discrete index theorem).
+the cross turns by +90° around a small loop. Each edge's wrapped step is taken once and
+negated the other way (a step of exactly ±π, as between a junction's held boundary cross
+and an interface's cross 45° off it, would otherwise count +π on both sides), so the sum
+over all triangles equals the winding of θ₄ along the mesh boundary exactly (a discrete
+index theorem): with the boundary rows held, the boundary's corners alone fix it.
 
 :func:`triangle_indices` and :func:`find_singularities` are pure NumPy;
 :func:`locate_singularities` works on a DOLFINx function and imports DOLFINx only
@@ -76,8 +79,16 @@ def triangle_indices(cells, q, coords=None) -> np.ndarray:
     """
     cells, q, coords = _check(cells, q, coords)
     theta4 = np.arctan2(q[:, 4], q[:, 3])
-    t = theta4[cells]  # (M, 3)
-    steps = _wrap(t[:, [1, 2, 0]] - t)  # edges 0→1, 1→2, 2→0
+    tail, head = cells, cells[:, [1, 2, 0]]  # edges 0→1, 1→2, 2→0
+    # Each edge's step is wrapped once, from its first end to its second in an order of
+    # the vertices that does not depend on the triangle, and negated for the other way:
+    # a step of exactly ±π (a held cross 45° off its neighbour's, at a junction) then
+    # counts +π in one triangle and −π in the other, and the sum over the triangles stays
+    # the winding along the boundary.
+    forward = _before(tail, head, coords)
+    first, second = np.where(forward, tail, head), np.where(forward, head, tail)
+    steps = _wrap(theta4[second] - theta4[first])
+    steps = np.where(forward, steps, -steps)
     turns = np.rint(steps.sum(axis=1) / (2 * np.pi))  # an integer up to rounding
     if coords is not None:
         x = coords[cells, :2]
@@ -85,6 +96,16 @@ def triangle_indices(cells, q, coords=None) -> np.ndarray:
         area2 = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
         turns = np.where(area2 < 0, -turns, turns)
     return turns / 4.0 + 0.0  # + 0.0 turns −0.0 into 0.0
+
+
+def _before(a: np.ndarray, b: np.ndarray, coords) -> np.ndarray:
+    """Whether vertex ``a`` comes before ``b``: by (x, y) where ``coords`` are given (the
+    same order on every rank), ties and no coordinates by index."""
+    if coords is None:
+        return a < b
+    xa, xb = coords[a, 0], coords[b, 0]
+    ya, yb = coords[a, 1], coords[b, 1]
+    return (xa < xb) | ((xa == xb) & ((ya < yb) | ((ya == yb) & (a < b))))
 
 
 def find_singularities(cells, coords, q) -> list[dict]:

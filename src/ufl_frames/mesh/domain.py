@@ -60,7 +60,15 @@ class Junction:
     A cross field aligned to every curve turns by α − k π/2 across a sector of angle α
     (k = round(α/(π/2))), so it has the index :attr:`index` there: 0 at a T or a cross
     of curves, at an interface meeting a straight boundary at 90°, at the end of an
-    embedded curve; +1/4 where three curves meet at 120°.
+    embedded curve; +1/4 where three curves meet at 120°; −1/4 at deal.II step-49's
+    300° slit tip, split 60° + 90° + 90° + 60° (3 quarter turns whole, 4 by sectors).
+
+    The regions the curves cut out, each with its own Poincaré–Hopf sum (a junction's
+    sectors its corners, k_i quarter turns each), sum to χ − Σ_c (2 − k_c)/4 − Σ_J
+    index_J, the whole domain's sum less the junctions' indices (Euler's formula over
+    the curves' arcs and junctions); the field's triangles, which also cover the
+    junctions, still sum to the whole domain's χ − Σ_c (2 − k_c)/4, the boundary
+    corners counted whole.
     """
 
     x: float

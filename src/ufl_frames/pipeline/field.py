@@ -274,11 +274,16 @@ class FrameField:
         The boundary's corners alone fix the sum: curves inside the domain (interfaces,
         embedded curves) only say where some singularities sit. ``junction_index`` is the
         index their junctions force (:attr:`~ufl_frames.mesh.domain.Junction.index`: 0 at
-        a T or at an interface meeting the boundary at 90°), part of ``index_sum``."""
+        a T or at an interface meeting the boundary at 90°), part of ``index_sum``: the
+        triangles touching a junction carry it. ``expected_away_from_junctions`` =
+        ``expected`` − ``junction_index`` is what the singularities inside the regions the
+        curves cut out sum to (each region's own Poincaré–Hopf sum, a junction's sectors
+        its corners of round(angle/90°) quarter turns; see ``Junction``)."""
         corners = self.domain.corners
         check = singularities.index_theorem(
             self.singularities, self.domain.euler_characteristic, [c.angle for c in corners]
         )
         check["corner_angles_deg"] = [round(math.degrees(c.angle), 6) for c in corners]
         check["junction_index"] = float(sum(j.index for j in self.domain.junctions)) + 0.0
+        check["expected_away_from_junctions"] = check["expected"] - check["junction_index"]
         return check
