@@ -1,4 +1,5 @@
-"""Smooth joints (param.features.with_smooth_joints): which model points a quad edge may span.
+"""Smooth joints (param.features.with_smooth_joints): which model points a quad edge may span
+(here beside the pipeline tests: the records it reads, mesh.domain.PhysicalGroup, need DOLFINx).
 
 Truth: a unit square of 2 × 2 cells cut into triangles, its bottom side made of two
 collinear curves that meet at (0.5, 0), a 90° corner at each of the four corners. The
