@@ -173,6 +173,37 @@ def test_fixed_point_charts_are_exact():
         assert np.array_equal(shifts[0], shifts[1])
 
 
+def test_a_map_running_backwards_along_the_boundary_is_untangled_by_sliding():
+    """A boundary vertex moved along its iso-line past its neighbour folds the boundary's
+    triangles (the map runs backwards there, as next to the sized airfoil's trailing
+    edge): untangling slides it back along the boundary, keeping the boundary's constant
+    coordinate, and the quads are the grid again."""
+    x, cells = l_shape(6)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    param = seamless.integrate(mesh, 3.3)
+    uv = param.uv.copy()
+    v = int(np.flatnonzero(np.all(np.isclose(x, [0.5, 0.0]), axis=1))[0])  # bottom edge
+    wedges = np.unique(mesh.corners[mesh.cells == v])
+    assert wedges.size == 1
+    right = int(np.flatnonzero(np.all(np.isclose(x, [0.5 + 1 / 6, 0.0]), axis=1))[0])
+    step = param.uv[np.unique(mesh.corners[mesh.cells == right])[0]] - param.uv[wedges[0]]
+    constant = int(np.argmin(np.abs(step)))  # the coordinate kept along y = 0
+    assert abs(step[constant]) < 1e-9 and abs(step[1 - constant]) > 0.2
+    before = param.uv[wedges[0]].copy()
+    uv[wedges[0], 1 - constant] += 0.8  # past its neighbour, 3.3 / 6 along
+    folded = seamless.parametrisation(mesh, uv, 3.3)
+    assert np.count_nonzero(seamless.folded(folded)) > 0
+    untangled, left = layout.untangle(folded)
+    assert left == 0
+    after = untangled.uv[wedges[0]]
+    assert after[constant] == before[constant]  # still on the boundary's iso-line
+    assert abs(after[1 - constant] - before[1 - constant]) < 0.05
+    quads, lay, _ = patches.quads_of_map(folded)
+    assert lay.folded.size == 0
+    assert check_quad_mesh(quads.points, quads.quads, area=3.0, rtol=1e-9) == []
+    assert quads.num_quads == 27
+
+
 def test_a_folded_map_is_reported_or_untangled():
     """A trace that enters a folded triangle stops, and the layout says so; untangled (the
     folded region relaxed towards its neighbours' mean, here towards the affine map until

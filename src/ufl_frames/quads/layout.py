@@ -34,6 +34,7 @@ import numpy as np
 
 from ufl_frames.param.seamless import (
     Parametrisation,
+    boundary_coordinates,
     curve_edge_ids,
     parametrisation,
     quarter_turn,
@@ -323,12 +324,47 @@ def _faces(arcs, ends, total):
     return patches
 
 
+def _boundary_sliders(mesh, chosen):
+    """(wedge, one boundary neighbour's wedge, the other's, the constant coordinate) of
+    each vertex of ``chosen`` that can slide along the boundary: one wedge (no cut
+    through it), two boundary edges that keep the same coordinate constant, and both
+    neighbours' wedges in its chart (the edges' own triangles)."""
+    boundary, constant = boundary_coordinates(mesh)
+    ends = mesh.edges[boundary]
+    owners = defaultdict(set)
+    for v, w in zip(mesh.cells.ravel().tolist(), mesh.corners.ravel().tolist(), strict=True):
+        owners[v].add(w)
+    touching = defaultdict(list)
+    for e, (u, v) in enumerate(ends.tolist()):
+        touching[u].append(e)
+        touching[v].append(e)
+    sliders = []
+    for v in np.flatnonzero(chosen).tolist():
+        if len(owners[v]) != 1 or len(touching[v]) != 2:
+            continue
+        (w,), (e1, e2) = owners[v], touching[v]
+        if constant[e1] != constant[e2]:
+            continue
+        neighbours = []
+        for e in (e1, e2):
+            f = int(mesh.faces[boundary[e], 0])
+            other = int(ends[e, 1] if ends[e, 0] == v else ends[e, 0])
+            local = int(np.flatnonzero(mesh.cells[f] == other)[0])
+            neighbours.append(int(mesh.corners[f, local]))
+        sliders.append((w, neighbours[0], neighbours[1], int(constant[e1])))
+    return sliders
+
+
 def untangle(param: Parametrisation, rounds: int = 200, rings: int = 3):
     """The seamless map with its folds smoothed out where it can: every interior vertex
     (not singular) within ``rings`` rings of a folded triangle moved, ``rounds`` times at
     most, to the mean of its neighbours in its own chart (all its wedges together, each
-    by its transition, so the map stays seamless; the boundary and the singular vertices
-    stay): a Tutte-like relaxation of the folded region.
+    by its transition, so the map stays seamless; the singular vertices and the model's
+    points stay): a Tutte-like relaxation of the folded region. A boundary vertex there
+    (one wedge, both its boundary edges keeping the same coordinate constant) slides
+    along its iso-line: its other coordinate goes to the mean of its two boundary
+    neighbours' (a boundary whose map runs backwards for a stretch, as next to the
+    airfoil's trailing edge, is folded there and only moving along it unfolds it).
 
     Args:
         param: the seamless map.
@@ -355,11 +391,12 @@ def untangle(param: Parametrisation, rounds: int = 200, rings: int = 3):
     region[cells[bad].ravel()] = True
     for _ in range(rings):
         region[cells[region[cells].any(axis=1)].ravel()] = True
-    region &= ~mc.on_boundary
     region[mesh.singular] = False
+    region[list(mc.model_nodes)] = False
+    sliders = _boundary_sliders(mesh, region & mc.on_boundary)
+    region &= ~mc.on_boundary
     curves, _ = curve_edge_ids(mesh)  # the features' curves and points stay: iso-lines
     region[mesh.edges[curves].ravel()] = False
-    region[list(mc.model_nodes)] = False
     # per vertex: (its wedge, the other two corners' wedges, rotation to the fan's first)
     fans = [(v, [(int(corners[f, loc]), int(corners[f, (loc + 1) % 3]),
                   int(corners[f, (loc + 2) % 3]), quarter_turn(kappa))
@@ -375,6 +412,8 @@ def untangle(param: Parametrisation, rounds: int = 200, rings: int = 3):
             mean = total / (2 * len(fan))
             for w, (R, t) in shifts.items():
                 uv[w] = R.T @ (mean - t)
+        for w, a, b, c in sliders:  # along the boundary: the free coordinate 1 - c
+            uv[w, 1 - c] = 0.5 * (uv[a, 1 - c] + uv[b, 1 - c])
         if sweep % 10 == 9 and not folded_now().any():
             break
     return parametrisation(mesh, uv, param.scale), int(np.count_nonzero(folded_now()))
