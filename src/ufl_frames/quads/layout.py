@@ -226,6 +226,9 @@ def _node_ends(mc, arcs, nodes):
     """
     leaving = defaultdict(list)  # node -> (triangle, direction, half-arc)
     for a, arc in enumerate(arcs):
+        if not arc.pieces:  # its two nodes coincide in the map: no direction to leave by
+            raise LayoutError(f"an arc between nodes {arc.start} and {arc.end} has no "
+                              "length in the map")
         f0, _, _, d0 = arc.pieces[0]
         f1, _, _, d1 = arc.pieces[-1]
         leaving[arc.start].append((f0, d0, 2 * a))
