@@ -31,6 +31,13 @@ def assembled(form):
     return A
 
 
+def assert_same_matrix(A, B, rtol=1e-13):
+    """‖A − B‖_F ≤ rtol ‖A‖_F (A is overwritten by A − B)."""
+    scale = A.norm(PETSc.NormType.FROBENIUS)
+    A.axpy(-1.0, B, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert A.norm(PETSc.NormType.FROBENIUS) <= rtol * scale
+
+
 @pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
 @pytest.mark.parametrize("shape, field", [("piano", "mbo"), ("annulus", "mbo"),
                                           ("piano", "arbitrary")])
@@ -61,9 +68,7 @@ def test_compiled_model_matrix_equals_the_ufl_form(shape, field, exact):
     for value in (0.0, 0.37):
         damping.value = value
         A, B = assembled(reference), assembled(compiled)
-        scale = A.norm(PETSc.NormType.FROBENIUS)
-        A.axpy(-1.0, B, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        assert A.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+        assert_same_matrix(A, B)
         A.destroy()
         B.destroy()
 
@@ -118,9 +123,7 @@ def test_reduced_model_matrix_equals_the_product_with_the_basis(columns, exact):
     full = assembled(make(q, damping, inverse_area))
     T = _block_columns(blocks, V)
     product = full.PtAP(T)
-    scale = product.norm(PETSc.NormType.FROBENIUS)
-    product.axpy(-1.0, reduced, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    assert product.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    assert_same_matrix(product, reduced)
     for matrix in (reduced, full, T, product):
         matrix.destroy()
 
@@ -196,9 +199,7 @@ def test_kernels_of_another_algebra_equal_its_ufl_forms(exact):
         compiled = kernels.damped_gauss_newton_form(q, damping, inverse_area, algebra=algebra)
     A = assembled(fem.form(ufl_form + damping * sobolev_form(V, 1.0)))
     B = assembled(compiled)
-    scale = A.norm(PETSc.NormType.FROBENIUS)
-    A.axpy(-1.0, B, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    assert A.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    assert_same_matrix(A, B)
     A.destroy()
     B.destroy()
 
@@ -240,9 +241,7 @@ def test_compiled_size_matrix_equals_the_ufl_form(exact):
     compiled = kernels.size_model_form(q, kernel)
     kernel.mode.value = kernels.SIZE_EXACT if exact else kernels.SIZE_GAUSS_NEWTON
     B = assembled(compiled)
-    scale = reference.norm(PETSc.NormType.FROBENIUS)
-    reference.axpy(-1.0, B, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    assert reference.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    assert_same_matrix(reference, B)
     reference.destroy()
     B.destroy()
 
@@ -307,9 +306,7 @@ def test_sized_reduced_kernel_equals_the_product_of_the_sum(mode):
     full.axpy(1.0, misfit, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
     T = _block_columns(blocks, V)
     product = full.PtAP(T)
-    scale = product.norm(PETSc.NormType.FROBENIUS)
-    product.axpy(-1.0, reduced, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    assert product.norm(PETSc.NormType.FROBENIUS) <= 1e-13 * scale
+    assert_same_matrix(product, reduced)
     direction = fem.Function(V)
     x = V.tabulate_dof_coordinates()
     direction.x.array[:] = np.cos(np.arange(5)[None, :] + 4.0 * x[:, :1] * x[:, 1:2]).ravel()

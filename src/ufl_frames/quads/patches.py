@@ -190,20 +190,18 @@ class _Points:
         if a != b:
             self.parent[max(a, b)] = min(a, b)
 
+    def _ids_on(self, kind: str) -> set:
+        """The points of the arcs whose flag ``kind`` ('boundary' or 'curve') is set."""
+        return {i for arc, ids in zip(self.lay.arcs, self.arc_ids, strict=True)
+                if getattr(arc, kind) for i in ids}
+
     def boundary_ids(self) -> set:
-        out = set()
-        for arc, ids in zip(self.lay.arcs, self.arc_ids, strict=True):
-            if arc.boundary:
-                out.update(ids)
-        return out
+        """The points on the boundary's arcs."""
+        return self._ids_on("boundary")
 
     def curve_ids(self) -> set:
         """The points on the features' interior curves (their arcs' points and ends)."""
-        out = set()
-        for arc, ids in zip(self.lay.arcs, self.arc_ids, strict=True):
-            if arc.curve:
-                out.update(ids)
-        return out
+        return self._ids_on("curve")
 
     def model_ids(self) -> set:
         """The nodes at the features' model points."""
