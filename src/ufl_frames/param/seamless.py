@@ -35,8 +35,8 @@ import scipy.sparse.linalg as spla
 from ufl_frames.param.cut import CutMesh, triangle_components
 
 __all__ = ["Parametrisation", "SeamlessSystem", "angle_sums", "boundary_coordinates",
-           "curve_edge_ids", "elimination", "factorise", "first_wedges", "folded", "gradients", "integrate",
-           "interior_curve_coordinates", "invalid",
+           "curve_edge_ids", "elimination", "factorise", "first_wedges", "folded",
+           "gradients", "integrate", "interior_curve_coordinates", "invalid",
            "least_squares_system", "miswound", "parametrisation", "quarter_turn",
            "scale_for_quad_count", "scale_for_quad_size", "targets", "wedge_of",
            "weighted_solve"]
