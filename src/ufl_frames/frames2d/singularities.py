@@ -213,8 +213,9 @@ def index_theorem(singularities: list[dict], euler_characteristic: int, corner_a
     Returns ``{"index_sum", "expected", "agrees", "euler_characteristic", "corners",
     "ambiguous_corners"}``. ``corners`` counts the corners that contribute (angle not
     180° rounded); ``ambiguous_corners`` those near an odd multiple of 45° above 90°
-    (135°, 225°, 315°; 45° is one quarter turn either way), where either rounding is right: ``expected`` is the lower sum (their k
-    rounded down) and each widens the agreement by 1/4 above it. Indices are multiples
+    (135°, 225°, 315°; 45° is one quarter turn either way), where either rounding is
+    right: ``expected`` is the lower sum (their k rounded down) and each widens the
+    agreement by 1/4 above it. Indices are multiples
     of 1/4, so sums are compared exactly after rounding.
 
     Args:
