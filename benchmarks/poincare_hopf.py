@@ -11,8 +11,9 @@ others). Each is solved in its own process group (killed after ``--timeout`` sec
     python -m ufl_frames.app solve FILE --out TMP --force -q --max-it N
 
 and a row printed from its ``summary.json``: triangles, the singularities' index sum,
-the expected sum (corners rounded to quarter turns; ``+k/4`` when k corners are within
-2° of an odd multiple of 45°, where either rounding is right), whether they agree, the
+the expected sum (corners rounded to quarter turns, at least one: a corner under 45° is a
+squeezed quad corner; ``+k/4`` when k corners are within 2° of 135°, 225° or 315°, where
+either rounding is right), whether they agree, the
 index the interior curves' junctions force (``junction``: part of the sum), the loader's
 note on the local feature size (``capped``: boundary points whose size it lowered) and
 the whole run's seconds. A failed run shows ``error``/``crash``/``timeout`` and its last

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from ufl_frames.frames2d.singularities import (
+    corner_cross,
+    corner_quarter_turns,
     find_singularities,
     index_theorem,
     locate_singularities,
@@ -277,6 +279,8 @@ def test_locate_rejects_scalar_space():
         (1, [120] * 6, -0.5),  # regular hexagon: 120° rounds to one quarter turn too
         (0, [240] * 6, 1.5),  # a hexagonal hole in a disc: reflex 240° → three
         (1, [179, 181, 90, 90, 90, 90], 0.0),  # near-straight points count as straight
+        (1, [30, 60, 90], 0.25),  # 30° is a squeezed quad corner, one quarter turn
+        (0, [90] * 4 + [27, 27], -1.5),  # a box around two disks meeting at 27° cusps
     ],
 )
 def test_poincare_hopf_sum(chi, corners_deg, expected):
@@ -305,3 +309,37 @@ def test_index_theorem_with_ambiguous_corners():
     agrees = [index_theorem([{"index": 0.25 + d, "x": 0, "y": 0}], 1, angles)["agrees"]
               for d in (-0.25, 0, 0.25, 0.5, 0.75)]
     assert agrees == [False, True, True, True, False]
+
+
+@pytest.mark.parametrize("degrees, k", [(5, 1), (23.6, 1), (44, 1), (46, 1), (60, 1),
+                                        (134, 1), (136, 2), (180, 2), (270, 3), (350, 4)])
+def test_corner_quarter_turns(degrees, k):
+    """round(α/90°), but a corner under 45° is one quarter turn (a quad corner squeezed
+    to α), never none."""
+    assert corner_quarter_turns(np.radians(degrees)) == k
+    assert corner_quarter_turns(np.radians([degrees, 90]))[0] == k
+
+
+@pytest.mark.parametrize("degrees", [10, 23.6, 27, 44, 60, 80, 150, 270])
+def test_corner_cross_turns_the_corners_quarter_turns(degrees):
+    """Rays along 0 and α from the corner, the domain between: the crosses of the two
+    curves are 0 and α (mod 90°). Going from the first curve's cross to the corner's and
+    on to the second's by the shortest steps, the cross turns by α − k·90° (k the corner's
+    quarter turns), each step under 45°: the corner's cross is half-way along that turn."""
+    alpha = np.radians(degrees)
+    psi = corner_cross(alpha / 2, alpha)  # the interior bisector: counter-clockwise from 0
+
+    def step(a, b):  # the shortest turn of a cross from angle a to angle b
+        return (b - a + np.pi / 4) % (np.pi / 2) - np.pi / 4
+
+    first, second = step(0.0, psi), step(psi, alpha)
+    assert max(abs(first), abs(second)) < np.pi / 4
+    assert first + second == pytest.approx(alpha - corner_quarter_turns(alpha) * np.pi / 2)
+    assert first == pytest.approx(second)
+
+
+def test_a_45_degree_corner_is_not_ambiguous():
+    """45° is one quarter turn rounded either way; 135° stays ambiguous (1 or 2)."""
+    check = index_theorem([], 1, np.radians([45, 135, 90]))
+    assert check["ambiguous_corners"] == 1
+    assert check["expected"] == 1 - (1 + 1 + 1) / 4

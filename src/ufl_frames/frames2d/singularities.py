@@ -25,6 +25,8 @@ import numpy as np
 from ufl_frames.frames2d.odeco import NUM_COEFFICIENTS
 
 __all__ = [
+    "corner_cross",
+    "corner_quarter_turns",
     "find_singularities",
     "index_theorem",
     "locate_singularities",
@@ -167,14 +169,37 @@ def locate_singularities(q_function) -> list[dict]:
     return sorted(found, key=lambda s: (s["x"], s["y"], s["index"]))
 
 
+def corner_quarter_turns(angles):
+    """The quarter turns k of boundary corners of interior angle α (radians): round(α/(π/2)),
+    but at least 1 — the corner rule of every stage (field, Poincaré–Hopf, map, quads).
+
+    A corner under 45° would round to 0 quarter turns: the cross would turn by α along
+    the boundary there and the map would flatten the corner to 0°, which no quad has.
+    Taken as one quarter turn (the cross turns by α − 90°) it is a quad corner squeezed
+    to α (scaled Jacobian sin α); equivalently a 0-turn corner with a −1/4 singularity
+    at its tip. Integers of ``angles``' shape (an int for a scalar)."""
+    k = np.maximum(1, np.rint(np.asarray(angles, dtype=np.float64) / (np.pi / 2)))
+    k = k.astype(np.int64)
+    return int(k) if k.ndim == 0 else k
+
+
+def corner_cross(bisector: float, angle: float) -> float:
+    """The cross angle ψ (mod π/2) at a corner of interior angle ``angle`` whose interior
+    bisector has the direction ``bisector`` (radians): the cross half-way between the two
+    curves' crosses along the turn of α − k π/2 (k = :func:`corner_quarter_turns`), so
+    ψ = bisector − k π/4. Where k = round(α/(π/2)) this is the cross nearest to both
+    curves' (their 4-fold average); under 45° it is that average turned by 45°."""
+    return float(bisector - corner_quarter_turns(angle) * np.pi / 4)
+
+
 def poincare_hopf_sum(euler_characteristic: int, corner_angles) -> float:
-    """χ − Σ_c (2 − k_c)/4, k_c = round(α_c / (π/2)): what the interior indices of a
-    boundary-aligned cross field sum to (module docstring); α_c in radians."""
+    """χ − Σ_c (2 − k_c)/4, k_c = :func:`corner_quarter_turns` (round(α_c / (π/2)), at
+    least 1): what the interior indices of a boundary-aligned cross field sum to (module
+    docstring); α_c in radians."""
     angles = np.asarray(corner_angles, dtype=np.float64).ravel()
     if not np.all(np.isfinite(angles)) or np.any(angles <= 0) or np.any(angles >= 2 * np.pi):
         raise ValueError("corner angles must lie in (0, 2π)")
-    quarter_turns = np.rint(angles / (np.pi / 2))
-    return float(euler_characteristic - np.sum(2 - quarter_turns) / 4) + 0.0
+    return float(euler_characteristic - np.sum(2 - corner_quarter_turns(angles)) / 4) + 0.0
 
 
 #: Corners within this of an odd multiple of 45° (radians) are ambiguous: the two curves'
@@ -187,9 +212,10 @@ def index_theorem(singularities: list[dict], euler_characteristic: int, corner_a
 
     Returns ``{"index_sum", "expected", "agrees", "euler_characteristic", "corners",
     "ambiguous_corners"}``. ``corners`` counts the corners that contribute (angle not
-    180° rounded); ``ambiguous_corners`` those near an odd multiple of 45° (45°, 135°,
-    225°, 315°), where either rounding is right: ``expected`` is the lower sum (their k
-    rounded down) and each widens the agreement by 1/4 above it. Indices are multiples
+    180° rounded); ``ambiguous_corners`` those near an odd multiple of 45° above 90°
+    (135°, 225°, 315°; 45° is one quarter turn either way), where either rounding is
+    right: ``expected`` is the lower sum (their k rounded down) and each widens the
+    agreement by 1/4 above it. Indices are multiples
     of 1/4, so sums are compared exactly after rounding.
 
     Args:
@@ -205,9 +231,10 @@ def index_theorem(singularities: list[dict], euler_characteristic: int, corner_a
     index_sum = float(np.rint(4 * sum(float(s["index"]) for s in singularities)) / 4) + 0.0
     quarter = np.pi / 2
     ambiguous = np.abs(angles / quarter - np.floor(angles / quarter) - 0.5) * quarter
-    ambiguous = ambiguous < AMBIGUOUS_CORNER_TOL
+    # 45° is not: one quarter turn rounded either way (corner_quarter_turns).
+    ambiguous = (ambiguous < AMBIGUOUS_CORNER_TOL) & (angles > quarter)
     # The ambiguous ones rounded down (k smaller: (2 − k)/4 larger, the lower sum).
-    rounded = np.where(ambiguous, np.floor(angles / quarter), np.rint(angles / quarter))
+    rounded = np.where(ambiguous, np.floor(angles / quarter), corner_quarter_turns(angles))
     low = float(euler_characteristic - np.sum(2 - rounded) / 4) + 0.0
     high = low + np.count_nonzero(ambiguous) / 4
     return {

@@ -21,6 +21,7 @@ init_petsc()
 import gmsh  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ufl_frames.frames2d.singularities import corner_cross  # noqa: E402
 from ufl_frames.mesh.domain import (  # noqa: E402
     NO_CURVE,
     Corner,
@@ -529,11 +530,44 @@ def cad_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
             angle = min((theta, 2 * math.pi - theta), key=lambda a: abs(a - mesh_angle[node]))
             if abs(angle - math.pi) > 1e-6:
                 corners.append(Corner(*here, angle))
+            if angle < math.pi / 4:  # the average above turns the 0-quarter-turn way
+                psi[node] = _acute_cross(outer)
             if inner:
                 sectors = _sectors(outer + inner, _first_boundary_ray(arrays, node, outer))
                 if sectors:
                     junctions.append(Junction(*here, sectors=sectors, on_boundary=True))
     return psi, corners, junctions
+
+
+def _acute_cross(rays) -> float:
+    """The cross ψ at a corner under 45° between the two ``rays`` (x, y) leaving it, the
+    domain between them: one quarter turn (:func:`~ufl_frames.frames2d.singularities.corner_cross`
+    of their bisector), not the 4-fold average's none."""
+    (ax, ay), (bx, by) = rays
+    ux, uy = ax / math.hypot(ax, ay) + bx / math.hypot(bx, by), \
+        ay / math.hypot(ax, ay) + by / math.hypot(bx, by)
+    theta = math.atan2(abs(ax * by - ay * bx), ax * bx + ay * by)
+    return corner_cross(math.atan2(uy, ux), theta)
+
+
+def acute_corner_directions(arrays: MeshArrays, mesh_angle: np.ndarray):
+    """The cross angles at the corners under 45° of a bare mesh (no CAD curves), from its
+    boundary edges: (nodes, ψ), or None where there are none. Elsewhere the boundary
+    cross is the 4-fold average of the edges' (:mod:`ufl_frames.fem.constraints`), which
+    at such a corner turns the 0-quarter-turn way (:func:`_acute_cross`)."""
+    nodes, psi = [], []
+    for v in np.unique(arrays.boundary):
+        if mesh_angle[v] >= math.pi / 4:
+            continue
+        after = arrays.boundary[arrays.boundary[:, 0] == v, 1]  # the domain on their left
+        before = arrays.boundary[arrays.boundary[:, 1] == v, 0]
+        if after.size == 1 and before.size == 1:
+            nodes.append(int(v))
+            psi.append(_acute_cross([tuple(arrays.x[after[0]] - arrays.x[v]),
+                                     tuple(arrays.x[before[0]] - arrays.x[v])]))
+    if not nodes:
+        return None
+    return np.asarray(nodes, dtype=np.int64), np.asarray(psi, dtype=np.float64)
 
 
 def _or_empty(values, shape=(0, 2)) -> np.ndarray:

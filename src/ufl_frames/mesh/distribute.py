@@ -32,6 +32,7 @@ from mpi4py import MPI  # noqa: E402
 
 from ufl_frames.mesh.arrays import (  # noqa: E402
     MeshArrays,
+    acute_corner_directions,
     cad_directions,
     euler_characteristic,
     interior_angles,
@@ -134,7 +135,8 @@ def _gmsh_session(make, source: str, cad: bool):
             nodes = np.flatnonzero(np.isfinite(psi)).astype(np.int64)
             directions = (nodes, psi[nodes])
         else:
-            corners, directions = mesh_corners(arrays, mesh_angle), None
+            corners = mesh_corners(arrays, mesh_angle)
+            directions = acute_corner_directions(arrays, mesh_angle)
         info = {
             "requested": requested,
             "corners": tuple(corners),

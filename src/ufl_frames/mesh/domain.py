@@ -18,6 +18,8 @@ import dolfinx  # noqa: E402
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
+from ufl_frames.frames2d.singularities import corner_quarter_turns  # noqa: E402
+
 #: Facet tag of boundary edges that lie on no curve of the file (a bare ``.msh``).
 NO_CURVE = 0
 
@@ -37,8 +39,10 @@ class TooManyTriangles(GeometryError):
 @dataclass(frozen=True)
 class Corner:
     """A corner of the boundary: position, interior angle (radians) and its quarter
-    turns ``k = round(angle / (π/2))``; a boundary-aligned cross field gets the index
-    (2 − k)/4 from it (a right-angled convex corner: 1/4, a reflex one: −1/4)."""
+    turns ``k = round(angle / (π/2))``, at least 1 (a corner under 45° is a squeezed quad
+    corner: :func:`~ufl_frames.frames2d.singularities.corner_quarter_turns`); a
+    boundary-aligned cross field gets the index (2 − k)/4 from it (a right-angled convex
+    corner: 1/4, a reflex one: −1/4)."""
 
     x: float
     y: float
@@ -46,7 +50,7 @@ class Corner:
 
     @property
     def quarter_turns(self) -> int:
-        return int(round(self.angle / (math.pi / 2)))
+        return corner_quarter_turns(self.angle)
 
 
 @dataclass(frozen=True)
@@ -79,9 +83,10 @@ class Junction:
     @property
     def index(self) -> float:
         """(k − Σ_i k_i)/4: k_i the sectors' quarter turns, k that of the whole angle
-        (4 inside the domain)."""
+        (4 inside the domain; on the boundary the corner's, at least 1 as for
+        :class:`Corner`)."""
         k = [int(round(a / (math.pi / 2))) for a in self.sectors]
-        whole = int(round(sum(self.sectors) / (math.pi / 2))) if self.on_boundary else 4
+        whole = corner_quarter_turns(sum(self.sectors)) if self.on_boundary else 4
         return (whole - sum(k)) / 4
 
 

@@ -30,7 +30,8 @@ from scipy.sparse import csgraph
 from ufl_frames.frames2d import odeco
 from ufl_frames.param.features import Features
 
-__all__ = ["CutMesh", "cancel_pairs", "comb", "cut_graph", "cut_mesh", "face_frames", "matchings",
+__all__ = ["CutMesh", "cancel_pairs", "comb", "cut_graph", "cut_mesh", "face_frames",
+           "face_frames_with", "matchings",
            "singular_vertices", "triangle_components", "wedges"]
 
 QUARTER = np.pi / 2
@@ -69,6 +70,18 @@ def face_frames(cells: np.ndarray, q: np.ndarray, frames=None):
     t, l1, l2 = relabel(t, l1, l2, k)
     angle = t[:, 0] + np.mean(_wrap(t - t[:, :1]), axis=1)
     return angle, l1.mean(axis=1), l2.mean(axis=1)
+
+
+def face_frames_with(cells: np.ndarray, q: np.ndarray, given=None, frames=None):
+    """:func:`face_frames`, but ``given`` = (triangles, angle, l1, l2) where set: the
+    frames of those triangles taken as they are (a lifted field, continuous where the
+    vertex crosses of a triangle are more than 45° apart: at a sharp corner)."""
+    angle, l1, l2 = face_frames(cells, q, frames)
+    if given is not None:
+        triangles, a, b, c = given
+        angle, l1, l2 = angle.copy(), l1.copy(), l2.copy()
+        angle[triangles], l1[triangles], l2[triangles] = a, b, c
+    return angle, l1, l2
 
 
 def interior_edges(cells: np.ndarray):
@@ -482,7 +495,7 @@ class CutMesh:
 
 
 def cut_mesh(x, cells, q, cancel_within: float | None = None,
-             features: Features | None = None) -> CutMesh:
+             features: Features | None = None, given_frames=None) -> CutMesh:
     """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``;
     with ``cancel_within``, opposite singular vertices closer than that are cancelled
     (:func:`cancel_pairs`); ``features`` kept on the record (the map's interior curves and
@@ -494,6 +507,8 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
         q: the P1 frame field's coefficients (n, 5).
         cancel_within: the distance of :func:`cancel_pairs` (None or 0: nothing cancelled).
         features: the geometry's regions, curves and points on this mesh, or None.
+        given_frames: (triangles, angle, l1, l2), frames of those triangles to take as
+            they are (:func:`face_frames_with`), or None.
 
     Returns:
         The :class:`CutMesh`, with the combed frames and the field's vertex angles.
@@ -511,7 +526,7 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
     q = np.asarray(q, dtype=np.float64)
     frames = odeco.q_to_frames(q)
-    angle, l1, l2 = face_frames(cells, q, frames)
+    angle, l1, l2 = face_frames_with(cells, q, given_frames, frames)
     edges, faces = interior_edges(cells)
     k = matchings(angle, faces)
     singular, turns = singular_vertices(cells, angle, edges, faces, k)

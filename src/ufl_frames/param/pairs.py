@@ -35,7 +35,8 @@ from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut as cutting
 from ufl_frames.param.features import Features
 
-__all__ = ["CLOSER_THAN", "RemovedPairs", "describe", "local_quad_edge", "remove_close_pairs"]
+__all__ = ["CLOSER_THAN", "AbsorbedCorners", "RemovedPairs", "absorb_at_acute_corners",
+           "acute_corners", "describe", "local_quad_edge", "remove_close_pairs"]
 
 #: Pairs closer than this many local quad edges are removed: both would have to be quad
 #: vertices a whole edge apart, so together they move by more than their distance. (The
@@ -122,7 +123,7 @@ def local_quad_edge(x, cells, q, quad_size: float | None = None,
 
 
 def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
-                       features: Features | None = None):
+                       features: Features | None = None, given_frames=None):
     """The field ``q`` with every ± pair of singular vertices closer than ``within`` local
     quad edges replaced, on a disk of triangles around it, by a field without
     singularities (see the module's note); closest pairs first, each vertex once.
@@ -134,6 +135,9 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
         edge: the local quad edge length per vertex (n,) (:func:`local_quad_edge`).
         within: the threshold in local quad edges.
         features: the model's curves and points on this mesh (patches keep off them).
+        given_frames: triangle frames the map takes as they are
+            (:attr:`AbsorbedCorners.frames`; their vertices are the corners' and stay
+            out of the patches), or None.
 
     Returns:
         (q, record): the new field (n, 5) (``q`` itself where nothing was removed) and
@@ -146,7 +150,7 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
     clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
     cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
     edges, faces = cutting.interior_edges(cells)
-    singular, turns = _singular(cells, q, edges, faces)
+    singular, turns = _singular(cells, q, edges, faces, given_frames)
     positive, negative = singular[turns == 1], singular[turns == -1]
     if positive.size == 0 or negative.size == 0:
         return q, RemovedPairs(within=within)
@@ -158,6 +162,8 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
     if not close:
         return q, RemovedPairs(within=within)
     blocked, rim = _blocked_vertices(x, cells, edges, faces, features)
+    if given_frames is not None:
+        blocked[cells[given_frames[0]].ravel()] = True
     n = x.shape[0]
     neighbours = sp.csr_matrix((np.ones(2 * edges.shape[0]),
                                 (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n))
@@ -176,7 +182,7 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
             trial = q_new.copy()
             why = _smooth_inside(x, cells, trial, patch)
             if why is None:
-                left, _ = _singular(cells, trial, edges, faces)
+                left, _ = _singular(cells, trial, edges, faces, given_frames)
                 expected = np.setdiff1d(current, [a, b])
                 if not np.array_equal(np.sort(left), expected):
                     why = "the smooth field inside would still be singular"
@@ -192,10 +198,11 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
     return (q_new if removed else q), record
 
 
-def _singular(cells, q, edges, faces):
+def _singular(cells, q, edges, faces, given=None):
     """(singular interior vertices, their turns in quarters) of the face field of ``q``
-    (:func:`~ufl_frames.param.cut.singular_vertices`)."""
-    angle, _, _ = cutting.face_frames(cells, q)
+    (:func:`~ufl_frames.param.cut.singular_vertices`; ``given`` frames as for
+    :func:`~ufl_frames.param.cut.face_frames_with`)."""
+    angle, _, _ = cutting.face_frames_with(cells, q, given)
     return cutting.singular_vertices(cells, angle, edges, faces)
 
 
@@ -234,6 +241,7 @@ def _patch(x, cells, neighbours, a, b, d, on_boundary):
     near = np.linalg.norm(x - (x[a] + t[:, None] * ab), axis=1) <= reach
     # the component of the near vertices that holds a (graph of mesh edges)
     sub = neighbours.multiply(near[:, None]).multiply(near[None, :]).tocsr()
+    sub.eliminate_zeros()  # csgraph counts stored zeros as edges
     _, label = csgraph.connected_components(sub, directed=False)
     near &= label == label[a]
     triangles = np.flatnonzero(near[cells].any(axis=1))
@@ -287,6 +295,20 @@ def _smooth_inside(x, cells, q, patch):
     """Replace ``q`` (in place) at the patch's free vertices by the harmonic extension
     (clipped cotangent weights) of the boundary frames' lifted angle and log lengths;
     the reason where the boundary's lifted angle does not close (None where it does)."""
+    lifted = _harmonic_lift(x, cells, q, patch)
+    if isinstance(lifted, str):
+        return lifted
+    verts, values = lifted
+    free = patch[0]
+    inner = values[np.searchsorted(verts, free)]
+    q[free] = odeco.frames_to_q(np.exp(inner[:, 1:]), inner[:, 0])
+    return None
+
+
+def _harmonic_lift(x, cells, q, patch):
+    """(the patch's vertices (sorted), their (angle, log l1, log l2) (nv, 3)): the rim's
+    frames lifted along it (one labelling, the angle continuous), extended harmonically
+    to the free vertices; or the reason where the lifted angle does not close."""
     free, triangles = patch
     loop = _boundary_cycle(cells, triangles)
     if loop is None:
@@ -317,9 +339,7 @@ def _smooth_inside(x, cells, q, patch):
     values[is_free] = np.asarray(solved).reshape(-1, 3)
     if not np.all(np.isfinite(values)):
         return "the harmonic extension failed"
-    inner = values[index[free]]
-    q[free] = odeco.frames_to_q(np.exp(inner[:, 1:]), inner[:, 0])
-    return None
+    return verts, values
 
 
 def _cotangent_laplacian(x, local_cells, index, size):
@@ -338,3 +358,169 @@ def _cotangent_laplacian(x, local_cells, index, size):
         vals += [-w, -w, w, w]
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                          shape=(size, size))
+
+
+#: A corner's patch reaches this many local edges beyond its −1/4 singular vertex.
+CORNER_RINGS = 2
+
+
+def acute_corners(x, cells) -> np.ndarray:
+    """The boundary vertices whose interior angle (the sum of their triangles' angles) is
+    under 45°: corners of one quarter turn that a smooth field rounds to none
+    (:func:`~ufl_frames.frames2d.singularities.corner_quarter_turns`)."""
+    from ufl_frames.param.seamless import angle_sums
+
+    x = np.asarray(x, dtype=np.float64)[:, :2]
+    cells = np.asarray(cells, dtype=np.int64)
+    edges, faces = cutting.interior_edges(cells)
+    boundary = np.unique(edges[faces[:, 1] < 0])
+    angle = np.abs(angle_sums(cells, x[cells], x.shape[0]))
+    return boundary[angle[boundary] < QUARTER / 2]
+
+
+@dataclass(frozen=True)
+class AbsorbedCorners:
+    """What :func:`absorb_at_acute_corners` made of a field, for the map: ``q`` the field
+    (the input where nothing changed), ``frames`` = (triangles, angle, l1, l2) the lifted
+    frames of the corners' triangles to take as they are
+    (:func:`~ufl_frames.param.cut.face_frames_with`; None: none), ``absorbed`` and
+    ``kept`` dicts ``{"corner": [x, y], "minus": [x, y], "distance"}`` of the singular
+    vertices moved into a corner and of those left (with ``"why"``)."""
+
+    q: np.ndarray = field(repr=False)
+    frames: tuple | None = field(default=None, repr=False)
+    absorbed: tuple = ()
+    kept: tuple = ()
+
+    def as_dict(self) -> dict:
+        """The record for ``summary.json``."""
+        return {"absorbed": len(self.absorbed), "corners": list(self.absorbed),
+                "kept": list(self.kept)}
+
+
+def absorb_at_acute_corners(x, cells, q, features: Features | None = None) -> AbsorbedCorners:
+    """The field ``q`` with the −1/4 singular vertex nearest to each corner under 45°
+    moved into the corner, for the map.
+
+    A boundary-aligned smooth field takes such a corner (its vertex cross held at one
+    quarter turn, :func:`~ufl_frames.frames2d.singularities.corner_cross`) as a corner of
+    none: the field between the two curves turns the short way, and the −1/4
+    singularity that makes up the difference sits out in the gap (its ± partner the
+    corner's triangle, which holds the quarter turn). A quad corner squeezed to the
+    corner's angle needs the quarter turn at the corner and no singularity in the gap:
+    on the disk of triangles around the corner within the singular vertex's distance
+    (and :data:`CORNER_RINGS` edges), the field is replaced by the harmonic extension of
+    its rim's lifted angle and log lengths (as :func:`remove_close_pairs` does; the rim
+    runs through the corner's held cross, so it closes only where the corner holds the
+    quarter turn). Near the corner the field turns by more than 45° across one triangle
+    (the gap is a triangle wide), more than a triangle's three crosses can say: the
+    disk's triangles keep the lifted field's frames (their vertices' mean), not those of
+    their vertex crosses. Refused (the field kept) where the rim does not close, another
+    singular vertex, a model point other than the corner or an interior model curve is
+    in the disk, the disk is no disk, or a singular vertex is left or made.
+
+    Args:
+        x: vertex coordinates (n, 2+).
+        cells: triangles (m, 3), either orientation.
+        q: the P1 frame field (n, 5); not modified.
+        features: the model's curves and points on this mesh.
+
+    Returns:
+        The :class:`AbsorbedCorners`.
+    """
+    x = np.asarray(x, dtype=np.float64)[:, :2]
+    cells = np.asarray(cells, dtype=np.int64)
+    q = np.asarray(q, dtype=np.float64)
+    corners = acute_corners(x, cells)
+    if corners.size == 0:
+        return AbsorbedCorners(q=q)
+    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
+    clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
+    edges, faces = cutting.interior_edges(cells)
+    singular, turns = _singular(cells, q, edges, faces)
+    minus_all = singular[turns == -1]
+    blocked, rim = _blocked_vertices(x, cells, edges, faces, features)
+    n = x.shape[0]
+    neighbours = sp.csr_matrix((np.ones(2 * edges.shape[0]),
+                                (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n))
+    length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
+    h = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
+        np.bincount(edges.ravel(), minlength=n), 1)
+    q_new, current, given = q, np.sort(singular), None
+    absorbed, kept = [], []
+    for v in corners:
+        minus = current[np.isin(current, minus_all)]
+        if minus.size == 0:
+            break
+        d = np.linalg.norm(x[minus] - x[v], axis=1)
+        b = int(minus[np.argmin(d)])
+        entry = {"corner": x[v].tolist(), "minus": x[b].tolist(), "distance": float(d.min())}
+        patch = _corner_patch(x, cells, neighbours, int(v), b,
+                              float(d.min()) + CORNER_RINGS * h[b], rim)
+        why = _corner_unusable(patch, cells, blocked, current, int(v), b)
+        lifted = why or _harmonic_lift(x, cells, q_new, patch)
+        if isinstance(lifted, str):
+            kept.append(dict(entry, why=lifted))
+            continue
+        verts, values = lifted
+        trial = q_new.copy()
+        free = patch[0]
+        inner = values[np.searchsorted(verts, free)]
+        trial[free] = odeco.frames_to_q(np.exp(inner[:, 1:]), inner[:, 0])
+        triangles = patch[1]
+        at = values[np.searchsorted(verts, cells[triangles])]  # (t, 3, 3)
+        mine = (triangles, at[:, :, 0].mean(axis=1), np.exp(at[:, :, 1]).mean(axis=1),
+                np.exp(at[:, :, 2]).mean(axis=1))
+        trial_given = mine if given is None else tuple(
+            np.concatenate([g, m]) for g, m in zip(given, mine, strict=True))
+        left, _ = _singular(cells, trial, edges, faces, trial_given)
+        expected = np.setdiff1d(current, [b])
+        if not np.array_equal(np.sort(left), expected):
+            kept.append(dict(entry, why="the smooth field inside would still be singular"))
+            continue
+        q_new, current, given = trial, expected, trial_given
+        absorbed.append(entry)
+    return AbsorbedCorners(q=q_new, frames=given, absorbed=tuple(absorbed), kept=tuple(kept))
+
+
+def _corner_patch(x, cells, neighbours, v, b, reach, on_boundary):
+    """(free vertices, triangles) of the disk of radius ``reach`` around corner ``v``: the
+    mesh-connected component of the vertices within ``reach`` that holds ``v`` (and
+    ``b``), their triangles; free are the vertices all of whose triangles are in it, off
+    the domain's boundary."""
+    near = np.linalg.norm(x - x[v], axis=1) <= reach
+    rows, cols = neighbours.nonzero()
+    both = near[rows] & near[cols]
+    sub = sp.csr_matrix((np.ones(int(both.sum())), (rows[both], cols[both])),
+                        shape=neighbours.shape)
+    _, label = csgraph.connected_components(sub, directed=False)
+    near &= label == label[v]
+    triangles = np.flatnonzero(near[cells].all(axis=1))
+    outside = np.zeros(x.shape[0], dtype=bool)
+    rest = np.ones(cells.shape[0], dtype=bool)
+    rest[triangles] = False
+    outside[cells[rest].ravel()] = True
+    inside = np.zeros(x.shape[0], dtype=bool)
+    inside[cells[triangles].ravel()] = True
+    free = np.flatnonzero(inside & ~outside & ~on_boundary)
+    return free, triangles
+
+
+def _corner_unusable(patch, cells, blocked, singular, v, b):
+    """Why the corner's patch cannot take a smooth field (None where it can)."""
+    free, triangles = patch
+    if b not in set(free.tolist()):
+        return "the patch does not hold the singularity"
+    points = np.setdiff1d(cells[triangles].ravel(), [v])
+    if blocked[points].any():
+        return "a model point or an interior model curve near the corner"
+    if set(np.intersect1d(singular, cells[triangles].ravel()).tolist()) - {b}:
+        return "another singularity in the patch"
+    used = np.unique(cells[triangles].ravel())
+    local_edges, local_faces = cutting.interior_edges(cells[triangles])
+    euler = used.size - local_edges.shape[0] + triangles.size
+    loops = cutting._boundary_loops(local_edges, local_faces, int(cells.max()) + 1)
+    if euler != 1 or len(loops) != 1:
+        return "the patch is not a disk"
+    return None

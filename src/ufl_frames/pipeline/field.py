@@ -278,7 +278,9 @@ class FrameField:
         triangles touching a junction carry it. ``expected_away_from_junctions`` =
         ``expected`` − ``junction_index`` is what the singularities inside the regions the
         curves cut out sum to (each region's own Poincaré–Hopf sum, a junction's sectors
-        its corners of round(angle/90°) quarter turns; see ``Junction``)."""
+        its corners of round(angle/90°) quarter turns; see ``Junction``). A boundary
+        corner is at least one quarter turn
+        (:func:`~ufl_frames.frames2d.singularities.corner_quarter_turns`)."""
         corners = self.domain.corners
         check = singularities.index_theorem(
             self.singularities, self.domain.euler_characteristic, [c.angle for c in corners]

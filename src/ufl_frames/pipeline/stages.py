@@ -70,6 +70,7 @@ class RootField:
     def __init__(self, frames: FrameField):
         from ufl_frames.param.features import with_smooth_joints
         from ufl_frames.param.gather import gather_features, gather_field
+        from ufl_frames.param.pairs import absorb_at_acute_corners
 
         self.domain = frames.domain
         self._arrays = gather_field(frames.q)  # (x, cells, rows) on rank 0
@@ -79,6 +80,9 @@ class RootField:
                 self.features, self._arrays[0], self._arrays[1],
                 getattr(frames.domain, "physical_groups", ()))
         self._cuts = {}
+        # corners under 45°: their −1/4 singular vertex moved into them, for the map
+        self.corners = None if self._arrays[0] is None else absorb_at_acute_corners(
+            self._arrays[0], self._arrays[1], self._arrays[2], self.features)
 
     def _cut_mesh(self, quad_size=None, quad_count=None):
         """(the cut mesh, the :class:`~ufl_frames.param.pairs.RemovedPairs`) at this quad
@@ -88,14 +92,16 @@ class RootField:
         into a disk; one cut per set of pairs removed, kept for every later stage."""
         from ufl_frames.param import cut, pairs
 
-        x, cells, q = self._arrays
+        x, cells, _ = self._arrays
+        q, given = self.corners.q, self.corners.frames
         if quad_size is None and quad_count is None:
             quad_count = max(1.0, cells.shape[0] / TRIANGLES_PER_QUAD)
         edge = pairs.local_quad_edge(x, cells, q, quad_size=quad_size, quad_count=quad_count)
         q_map, removed = pairs.remove_close_pairs(x, cells, q, edge, within=pairs.CLOSER_THAN,
-                                                  features=self.features)
+                                                  features=self.features, given_frames=given)
         if removed.key not in self._cuts:
-            self._cuts[removed.key] = cut.cut_mesh(x, cells, q_map, features=self.features)
+            self._cuts[removed.key] = cut.cut_mesh(x, cells, q_map, features=self.features,
+                                                   given_frames=given)
         return self._cuts[removed.key], removed
 
     def on_root(self, work, failure: str, quad_size=None, quad_count=None):
