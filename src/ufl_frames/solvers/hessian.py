@@ -65,9 +65,11 @@ SIZED_SWITCH = 3e-2
 #: pivots is factorised again with R + δ I, δ = :data:`INERTIA_FLOOR` μ ×
 #: :data:`INERTIA_GROWTH`^j (μ the mean diagonal of Tᵀ G T), at most k times, before the
 #: Gauss–Newton fallback. A small δ keeps the exact model's negative curvature as long,
-#: cheap directions: on the sized piano (1 887 / 7 539 triangles, one level) 18 / 42 Newton
-#: steps instead of 25 / 51 with the Gauss–Newton fallback alone, no fallback left, the
-#: same minima; a large one is a slow gradient-like model (δ = 1e-2 μ: 203 steps at 7 539).
+#: cheap directions: the sized piano's nested levels (1 887 / 7 539 / 29 597) take 14 / 22
+#: / 17 Newton steps instead of 25 / 21 / 18 to the same minima, and the 24 687-triangle
+#: level of the 10⁵ hierarchy 53 instead of 87 (benchmarks/README, "Inertia correction of
+#: the exact steps"). A large one is a slow gradient-like model (every shift ≥ 1e-2 μ, a
+#: prototype: 203 steps on 7 539 triangles, one level, against 51).
 INERTIA_SHIFTS = 4
 INERTIA_FLOOR = 1e-4
 INERTIA_GROWTH = 8.0
@@ -630,10 +632,11 @@ class GaussNewtonModel(ActiveSetRules):
         after the switch (the misfit's residual ∇σ is not small at the minimum): each such
         step was redone with Gauss–Newton (:meth:`gauss_newton_step`), which crawled
         along directions of negative curvature with whole steps that each lowered J by
-        ~1e-3 of it (the sized piano at 1 887 triangles: 12 such steps in a row). A shift
-        of 1e-6–5e-4 of μ makes the factorisation positive definite and keeps those
-        directions as long steps (benchmarks/README, "Inertia correction of the exact
-        steps").
+        ~1e-3 of it (the sized piano at 1 887 triangles: 12 such steps in a row). Where
+        one of the shifts 1e-4 μ … 5e-2 μ makes the factorisation positive definite, the
+        step keeps those directions as long ones (there: 14 steps instead of 25, no
+        fallback; benchmarks/README, "Inertia correction of the exact steps"). Where none
+        does, the shift is taken off and the step falls back to Gauss–Newton.
         """
         total = INERTIA_FLOOR * self.mu * INERTIA_GROWTH**tries
         return total if tries == 0 else total - total / INERTIA_GROWTH
