@@ -68,10 +68,10 @@ def petsc_option_problem(options) -> str | None:
 
     ``-tao_type`` must be one of :data:`TAO_TYPES`; ``-*ksp_type``, ``-*pc_type`` and
     ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer;
-    ``-frames_active_rounds`` and ``-frames_hessian_inertia_shifts`` integers >= 0; ``-frames_hessian`` one of
-    :data:`HESSIANS`; ``-frames_size_hessian`` one of :data:`SIZE_HESSIANS`; dampings and
-    tolerances finite numbers >= 0; switches (``-frames_gn_adapt``,
-    ``-frames_active_consistent``, ...) true or false.
+    ``-frames_active_rounds`` and ``-frames_hessian_inertia_shifts`` integers >= 0;
+    ``-frames_hessian`` one of :data:`HESSIANS`; ``-frames_size_hessian`` one of
+    :data:`SIZE_HESSIANS`; dampings and tolerances finite numbers >= 0; switches
+    (``-frames_gn_adapt``, ``-frames_active_consistent``, ...) true or false.
     """
     values = dict(options.items() if isinstance(options, dict) else options)
     for name, value in values.items():
