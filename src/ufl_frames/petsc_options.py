@@ -35,7 +35,7 @@ SIZE_HESSIANS = {"exact": 1, "modified": 2, "gauss_newton": 0}
 #: Options naming a PETSc type, by suffix: ``-mbo_ksp_type``, ``-tao_nls_pc_type``...
 _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 #: Integer options and their least value.
-_INTS = {"tao_max_it": 1, "frames_active_rounds": 0}
+_INTS = {"tao_max_it": 1, "frames_active_rounds": 0, "frames_hessian_inertia_shifts": 0}
 _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
                        "frames_h_rtol", "frames_nested_rtol", "tao_gatol", "tao_grtol",
                        "tao_gttol")
@@ -68,10 +68,10 @@ def petsc_option_problem(options) -> str | None:
 
     ``-tao_type`` must be one of :data:`TAO_TYPES`; ``-*ksp_type``, ``-*pc_type`` and
     ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer;
-    ``-frames_active_rounds`` an integer >= 0; ``-frames_hessian`` one of
-    :data:`HESSIANS`; ``-frames_size_hessian`` one of :data:`SIZE_HESSIANS`; dampings and
-    tolerances finite numbers >= 0; switches (``-frames_gn_adapt``,
-    ``-frames_active_consistent``, ...) true or false.
+    ``-frames_active_rounds`` and ``-frames_hessian_inertia_shifts`` integers >= 0;
+    ``-frames_hessian`` one of :data:`HESSIANS`; ``-frames_size_hessian`` one of
+    :data:`SIZE_HESSIANS`; dampings and tolerances finite numbers >= 0; switches
+    (``-frames_gn_adapt``, ``-frames_active_consistent``, ...) true or false.
     """
     values = dict(options.items() if isinstance(options, dict) else options)
     for name, value in values.items():

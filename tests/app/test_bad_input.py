@@ -132,6 +132,7 @@ def shared_tmp(tmp_path):
         (["-frames_nested_rtol", "nan"], ["-frames_nested_rtol"]),
         (["-frames_active_rounds", "-1"], ["-frames_active_rounds"]),
         (["-frames_active_rounds", "1.5"], ["-frames_active_rounds"]),
+        (["-frames_hessian_inertia_shifts", "-1"], ["-frames_hessian_inertia_shifts"]),
         (["-frames_active_consistent", "maybe"], ["-frames_active_consistent", "true or false"]),
     ],
 )

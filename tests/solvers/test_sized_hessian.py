@@ -1,6 +1,7 @@
 """The hybrid Newton model with a size target (the sized energy J = H + w H_s M): the
-earlier switch (``SIZED_SWITCH``) and the safeguard that takes an exact step whose
-factorisation is indefinite with Gauss–Newton (``GaussNewtonModel.gauss_newton_step``).
+earlier switch (``SIZED_SWITCH``) and the safeguard of an exact step whose factorisation
+is indefinite: refactorised with a shift (``GaussNewtonModel.inertia_shift``), then taken
+with Gauss–Newton (``GaussNewtonModel.gauss_newton_step``).
 
 Serial and under MPI (``mpirun -n 2 python -m pytest -m "not serial"``).
 """
@@ -80,7 +81,7 @@ def test_safeguard_takes_the_indefinite_exact_steps_with_gauss_newton(monkeypatc
         fallbacks.append(self.fallbacks)
 
     monkeypatch.setattr(GaussNewtonModel, "update", recording)
-    guarded = sized_solve()
+    guarded = sized_solve({"frames_hessian_inertia_shifts": 0})
     monkeypatch.undo()
     plain = sized_solve({"frames_hessian_safeguard": "false",
                          "frames_hessian_switch": 1e-3})
@@ -93,6 +94,32 @@ def test_safeguard_takes_the_indefinite_exact_steps_with_gauss_newton(monkeypatc
     assert any(e["ksp_its"] == 0 for e in plain.history[2:])
     assert guarded.H_final == pytest.approx(plain.H_final, rel=1e-6)
     assert guarded.iterations < 0.8 * plain.iterations
+
+
+def test_inertia_shifts_make_the_exact_steps_definite_and_the_solve_shorter():
+    """With the inertia correction (the default) the indefinite exact steps are
+    refactorised with R + δ I until MUMPS finds no negative pivot: none falls back to
+    Gauss–Newton, each shifted step cost at most ``inertia_shifts`` refactorisations, and
+    the solve ends at the minimum of the Gauss–Newton fallback alone (J to 1e-6, the
+    same singularities) in fewer Newton steps."""
+    shifted = FrameField.initial(build(COMM, "piano", mesh_size=MESH_SIZE),
+                                 size=SizeTarget.uniform())
+    plain = FrameField.initial(build(COMM, "piano", mesh_size=MESH_SIZE),
+                               size=SizeTarget.uniform())
+    with options_scope([]):
+        fast = shifted.solve(max_it=500)
+    with options_scope([("frames_hessian_inertia_shifts", 0)]):
+        slow = plain.solve(max_it=500)
+    for result in (fast, slow):
+        assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
+    last = fast.history[-1]
+    assert last["shifted"] > 0 and last["fallbacks"] == 0, last
+    assert last["shifted"] <= last["shift_factorisations"] <= 4 * last["shifted"]
+    assert slow.history[-1]["shifted"] == 0 and slow.history[-1]["fallbacks"] > 0
+    assert fast.H_final == pytest.approx(slow.H_final, rel=1e-6)
+    assert fast.iterations < slow.iterations
+    assert [(s["index"], round(s["x"], 2), round(s["y"], 2)) for s in shifted.singularities] \
+        == [(s["index"], round(s["x"], 2), round(s["y"], 2)) for s in plain.singularities]
 
 
 def test_the_unsized_problem_never_falls_back(monkeypatch):
@@ -116,13 +143,16 @@ def test_modified_size_hessian_reaches_the_same_minimum_with_fewer_indefinite_st
     semidefinite, ``kernels.SIZE_MODIFIED``) ends at the exact model's minimum (both stop
     on J's relative change of 1e-4 a step, ``-frames_h_rtol``, or on the gradient, hence
     1e-3), and a smaller share of its exact factorisations is indefinite (the history's
-    safeguard counts: checked ≥ fallen back)."""
-    exact = sized_solve()
-    modified = sized_solve({"frames_size_hessian": "modified"})
+    safeguard counts: checked ≥ shifted + fallen back), with the Gauss–Newton fallback
+    alone (no inertia shifts) as the previous session measured it."""
+    exact = sized_solve({"frames_hessian_inertia_shifts": 0})
+    modified = sized_solve({"frames_size_hessian": "modified",
+                            "frames_hessian_inertia_shifts": 0})
     for result in (exact, modified):
         assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
         last = result.history[-1]
-        assert 0 < last["exact_checks"] and 0 <= last["fallbacks"] <= last["exact_checks"]
+        assert 0 < last["exact_checks"]
+        assert 0 <= last["fallbacks"] + last["shifted"] <= last["exact_checks"]
     assert modified.H_final == pytest.approx(exact.H_final, rel=1e-3)
 
     def share(result):
@@ -138,3 +168,5 @@ def test_a_bad_size_hessian_is_one_clear_line():
     problem = petsc_option_problem({"frames_size_hessian": "clipped"})
     assert problem == ("-frames_size_hessian must be one of exact, modified, gauss_newton, "
                        "got 'clipped'")
+    assert petsc_option_problem({"frames_hessian_inertia_shifts": 0}) is None
+    assert "an integer >= 0" in petsc_option_problem({"frames_hessian_inertia_shifts": -1})

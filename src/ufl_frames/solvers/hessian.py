@@ -30,7 +30,8 @@ from ufl_frames.solvers.active_set import (  # noqa: E402
     ActiveSetRules,
 )
 
-__all__ = ["DEFAULT_DAMPING", "HYBRID_SWITCH", "SIZED_SWITCH", "GaussNewtonModel"]
+__all__ = ["DEFAULT_DAMPING", "HYBRID_SWITCH", "INERTIA_SHIFTS", "SIZED_SWITCH",
+           "GaussNewtonModel"]
 
 #: Default λ₀ of the Levenberg–Marquardt damping (``-frames_gn_damping``).
 DEFAULT_DAMPING = 1.0
@@ -59,6 +60,19 @@ HYBRID_SWITCH = 1e-3
 #: steps instead of 38 / 39 / 36 and end at the same minima (benchmarks/README, "Where the
 #: sized problem's Newton steps go").
 SIZED_SWITCH = 3e-2
+#: Inertia correction of the safeguarded exact steps (:meth:`GaussNewtonModel.inertia_shift`,
+#: ``-frames_hessian_inertia_shifts k``): an exact step whose factorisation has negative
+#: pivots is factorised again with R + δ I, δ = :data:`INERTIA_FLOOR` μ ×
+#: :data:`INERTIA_GROWTH`^j (μ the mean diagonal of Tᵀ G T), at most k times, before the
+#: Gauss–Newton fallback. A small δ keeps the exact model's negative curvature as long,
+#: cheap directions: the sized piano's nested levels (1 887 / 7 539 / 29 597) take 14 / 22
+#: / 17 Newton steps instead of 25 / 21 / 18 to the same minima, and the 24 687-triangle
+#: level of the 10⁵ hierarchy 53 instead of 87 (benchmarks/README, "Inertia correction of
+#: the exact steps"). A large one is a slow gradient-like model (every shift ≥ 1e-2 μ, a
+#: prototype: 203 steps on 7 539 triangles, one level, against 51).
+INERTIA_SHIFTS = 4
+INERTIA_FLOOR = 1e-4
+INERTIA_GROWTH = 8.0
 
 
 def sobolev_form(V: fem.FunctionSpace, area: float) -> ufl.Form:
@@ -223,7 +237,7 @@ class GaussNewtonModel(ActiveSetRules):
                  release: float = RELEASE_RATIO, lean: bool = False, bound_steps: bool = True,
                  switch: float | None = None, consistent: bool = False,
                  rounds: int = CONSISTENT_ROUNDS, safeguard: bool = True,
-                 size_mode: int = kernels.SIZE_EXACT):
+                 size_mode: int = kernels.SIZE_EXACT, inertia_shifts: int = INERTIA_SHIFTS):
         """The model at ``problem``'s current q (collective; :meth:`free` destroys it).
 
         Args:
@@ -243,7 +257,9 @@ class GaussNewtonModel(ActiveSetRules):
             rounds: refactorisations at most per step there.
             safeguard: with a size target, an exact step of the hybrid model whose
                 factorisation is indefinite is taken with Gauss–Newton
-                (:meth:`gauss_newton_step`, ``-frames_hessian_safeguard``).
+                (:meth:`gauss_newton_step`, ``-frames_hessian_safeguard``), after at most
+                ``inertia_shifts`` factorisations shifted to correct its inertia
+                (:meth:`inertia_shift`, ``-frames_hessian_inertia_shifts``; 0: none).
             size_mode: the size misfit's matrix where the model is exact (lean model,
                 ``-frames_size_hessian``): :data:`kernels.SIZE_EXACT`, its second
                 derivative, or :data:`kernels.SIZE_MODIFIED`, its positive semidefinite
@@ -261,6 +277,9 @@ class GaussNewtonModel(ActiveSetRules):
         self.switched = False  # the hybrid model has switched to the exact Hessian
         self.fallbacks = 0  # exact steps taken as Gauss–Newton (gauss_newton_step)
         self.exact_checks = 0  # exact factorisations the safeguard read the inertia of
+        self.inertia_shifts = inertia_shifts  # shifted refactorisations at most a step
+        self.shifted = 0  # exact steps taken with an inertia shift (inertia_shift)
+        self.shift_factorisations = 0  # the refactorisations those shifts cost
         self._gnorm = None  # |g| of the last update (the damping of a fallback)
         self.bound_steps = bound_steps  # see _reached_bound
         self.lean = lean
@@ -600,6 +619,27 @@ class GaussNewtonModel(ActiveSetRules):
         indefinite is taken with Gauss–Newton instead (:meth:`gauss_newton_step`): with a
         size target, where the model switched to the exact Hessian."""
         return self.safeguard and self.problem.size is not None and self.switched
+
+    def inertia_shift(self, tries: int) -> float:
+        """The shift δ_j the ``tries``-th refactorisation (j = ``tries`` ≥ 0) of an
+        indefinite exact step adds to the model (TAO's shift ``shift_value``: the operator
+        and R alike), on top of the δ_0 … δ_{j−1} added before: δ_0 + … + δ_j =
+        :data:`INERTIA_FLOOR` μ :data:`INERTIA_GROWTH`^j, μ the mean diagonal of Tᵀ G T
+        (the inertia correction of interior-point methods, e.g. IPOPT's, with no memory
+        between steps, so that a resumed solve takes the same shifts).
+
+        The exact Hessian of the sized energy J = H + w H_s M is indefinite on many steps
+        after the switch (the misfit's residual ∇σ is not small at the minimum): each such
+        step was redone with Gauss–Newton (:meth:`gauss_newton_step`), which crawled
+        along directions of negative curvature with whole steps that each lowered J by
+        ~1e-3 of it (the sized piano at 1 887 triangles: 12 such steps in a row). Where
+        one of the shifts 1e-4 μ … 5e-2 μ makes the factorisation positive definite, the
+        step keeps those directions as long ones (there: 14 steps instead of 25, no
+        fallback; benchmarks/README, "Inertia correction of the exact steps"). Where none
+        does, the shift is taken off and the step falls back to Gauss–Newton.
+        """
+        total = INERTIA_FLOOR * self.mu * INERTIA_GROWTH**tries
+        return total if tries == 0 else total - total / INERTIA_GROWTH
 
     def gauss_newton_step(self) -> bool:
         """Reassemble the model of the current step as Gauss–Newton (the hybrid model's

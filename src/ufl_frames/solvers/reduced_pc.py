@@ -83,12 +83,34 @@ class ReducedFactorPC:
         self.ksp.setUp()
         safeguarded = self.model.safeguarded
         self.model.exact_checks += int(safeguarded and self.model.exact)
+        if safeguarded and self.model.exact and self.negative_pivots():
+            self._correct_inertia()
         if safeguarded and self.negative_pivots() and self.model.gauss_newton_step():
             T, R = self.model.reduced_operator()
             self.ksp.setOperators(R)
             self.ksp.setUp()
         if self.work is None:
             self.work = (R.createVecRight(), R.createVecRight(), T.createVecLeft())
+
+    def _correct_inertia(self) -> bool:
+        """Refactorise an indefinite exact model with the shifts of
+        :meth:`GaussNewtonModel.inertia_shift` until R has no negative pivot (at most
+        ``inertia_shifts`` times); the model keeps the shift that did it. Returns whether
+        one did (if not, the shift is taken off again and the Gauss–Newton fallback
+        follows)."""
+        model, added = self.model, 0.0
+        for tries in range(model.inertia_shifts):
+            delta = model.inertia_shift(tries)
+            model.shift_value += delta
+            added += delta
+            self.ksp.setOperators(model.reduced_operator()[1])
+            self.ksp.setUp()
+            model.shift_factorisations += 1
+            if not self.negative_pivots():
+                model.shifted += 1
+                return True
+        model.shift_value -= added
+        return False
 
     def negative_pivots(self) -> int:
         """The negative pivots of the last factorisation of R (MUMPS' INFOG(12), over all

@@ -38,7 +38,9 @@ on round-off. TAO types:
   frames; for non-isotropic ones Gauss–Newton, then the exact Hessian once the gradient
   is below τ = 1e-3 of its start (``-frames_hessian hybrid|exact|gauss_newton``,
   ``-frames_hessian_switch τ``; with a size target τ = 3e-2, and an exact step whose
-  factorisation is indefinite taken with Gauss–Newton, ``-frames_hessian_safeguard``);
+  factorisation is indefinite refactorised with a small shift, up to
+  ``-frames_hessian_inertia_shifts k`` times (default 4), and then taken with
+  Gauss–Newton, ``-frames_hessian_safeguard``);
   the Newton systems
   are solved by TAO's KSP (``-tao_nls_ksp_type``, ``-tao_nls_pc_type``: by default a
   sparse Cholesky factorisation in reduced tangent coordinates, 3 unknowns per vertex,
@@ -74,6 +76,7 @@ from ufl_frames.solvers.active_set import CONSISTENT_ROUNDS, RELEASE_RATIO  # no
 from ufl_frames.solvers.hessian import (  # noqa: E402
     DEFAULT_DAMPING,
     HYBRID_SWITCH,
+    INERTIA_SHIFTS,
     SIZED_SWITCH,
     GaussNewtonModel,
 )
@@ -493,6 +496,10 @@ class _TaoSolve:
             # the safeguard's count so far: exact factorisations checked, and those found
             # indefinite and redone as Gauss–Newton
             entry["exact_checks"], entry["fallbacks"] = model.exact_checks, model.fallbacks
+            # ... and those made definite by a shift (GaussNewtonModel.inertia_shift), with
+            # the refactorisations that cost
+            entry["shifted"] = model.shifted
+            entry["shift_factorisations"] = model.shift_factorisations
         history.append(entry)
         if self.checkpoint is not None:
             self.checkpoint(self.snapshot(tao, float(step)))
@@ -575,6 +582,7 @@ class _TaoSolve:
                                  if self.problem.size is None else SIZED_SWITCH)
                     if hessian == "hybrid" else None),
             safeguard=opts.getBool("frames_hessian_safeguard", True),
+            inertia_shifts=opts.getInt("frames_hessian_inertia_shifts", INERTIA_SHIFTS),
             size_mode=SIZE_HESSIANS.get(opts.getString("frames_size_hessian", "exact"),
                                         SIZE_HESSIANS["exact"])))
         if resume is not None and resume.adaptation is not None:
