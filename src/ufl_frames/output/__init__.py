@@ -35,6 +35,8 @@ __all__ = sorted(_EXPORTS)
 
 
 def __getattr__(name: str):
+    if name in set(_EXPORTS.values()) | {"volume"}:  # a submodule, not yet imported
+        return importlib.import_module(f"ufl_frames.output.{name}")
     if name not in _EXPORTS:
         raise AttributeError(f"module 'ufl_frames.output' has no attribute {name!r}")
     value = getattr(importlib.import_module(f"ufl_frames.output.{_EXPORTS[name]}"), name)
