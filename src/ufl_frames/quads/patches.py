@@ -44,6 +44,7 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 from ufl_frames.param.seamless import Parametrisation, folded
 from ufl_frames.quads.charts import UNIT, LayoutError
 from ufl_frames.quads.extract import QuadMesh, with_features
+from ufl_frames.quads.improve import onto_boundary
 from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
 from ufl_frames.quads.motorcycles import rot
 
@@ -113,12 +114,8 @@ def integer_lengths(lay: Layout, weights=None,
     L = lay.lengths()
     w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
     lower = np.where(L < collapse_below, 0.0, 1.0)
-    # the features' curves and the arcs at their model points keep a length: a collapse
-    # would glue two of them
-    model = {k for k, key in enumerate(lay.nodes)
-             if key[0] == "v" and key[1] in lay.motorcycles.model_nodes}
-    lower[[a for a, arc in enumerate(lay.arcs)
-           if arc.curve or arc.start in model or arc.end in model]] = 1.0
+    # the features' curves keep a length: a collapse would glue two of their points
+    lower[[a for a, arc in enumerate(lay.arcs) if arc.curve]] = 1.0
     for _ in range(L.size + 1):
         n = _solve(lay, lower, w)
         points = _Points(lay, n)
@@ -519,6 +516,18 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
     np.add.at(sums, root[chosen], xy[chosen])
     counts = np.bincount(root[chosen], minlength=total)
     points = sums[used] / counts[used, None]
+    # singular vertices glued to the boundary (no corner there), or boundary points
+    # (corners) glued together, with no model point or curve point: the boundary point
+    # they make has no one place in the map (the mean of the boundary points is off a
+    # curved boundary): it goes where its edges follow the boundary best
+    special = np.zeros(total, dtype=bool)
+    special[list(pts.curve_ids() | pts.model_ids())] = True
+    pinned, fan = np.zeros(total, dtype=bool), np.zeros(total, dtype=bool)
+    np.logical_or.at(pinned, root, special)
+    np.logical_or.at(fan, root, rank == 3)
+    free = (((best[used] == 1) & fan[used]) | ((best[used] <= 1) & (counts[used] > 1))) \
+        & ~pinned[used]
+    points = onto_boundary(points, quads, np.flatnonzero(free), mc.mesh.x, mc.mesh.cells)
     a, b = quads.ravel(), np.roll(quads, -1, axis=1).ravel()
     m = points.shape[0]
     pairs, counts = np.unique(np.minimum(a, b) * m + np.maximum(a, b), return_counts=True)
