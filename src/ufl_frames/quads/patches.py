@@ -13,7 +13,11 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    a kept patch with two corners on one point, or glue singular vertices to the boundary
    where the quads left there would not make a valid fan (:meth:`_Points.valid_fan`: the
    domain's angle there shared by the quads, each within :data:`FAN_ANGLES`), the arcs
-   collapsed there get at least 1 and the program is solved again (until none does). So
+   collapsed there get at least 1 and the program is solved again (until none does).
+   Interior curves' arcs keep a length; an arc at a model point may collapse (a trace
+   passing a fraction of a quad from a corner, the airfoil's trailing edge say, goes
+   through it), the model point staying where it is, but not so as to glue it to another
+   model or curve point or to another boundary point (:meth:`_Points.bad_merges`). So
    a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
    goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
    its separatrices and the boundary collapse: no sliver layer); a valence-3 one (turn
@@ -28,7 +32,13 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    (straight segments in the patch's chart, across seams). Arc points are computed once,
    so the patches that share an arc share its points: the quads are conforming; points
    glued by a collapse become one (a boundary corner's, else the boundary's, else the
-   singular vertex's, else their mean).
+   singular vertex's, else their mean). Where that point has no one place on the
+   boundary (singular vertices glued to it, or several boundary points or corners glued,
+   none a model or curve point), it goes on the boundary between its two boundary
+   neighbours where its two quad edges follow it best
+   (:func:`~ufl_frames.quads.improve.onto_boundary`): at a round nose a fraction of a
+   quad wide, whose thin patches collapse and glue its −1/4 singular vertices to it, the
+   nose's tip.
 
 Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map (of one or
 more connected components: each has its own patches).
