@@ -26,7 +26,12 @@ from ufl_frames.frames2d import odeco
 from ufl_frames.param import cut, quantise, seamless
 from ufl_frames.param.features import Features
 from ufl_frames.quads import extract, patches
-from ufl_frames.quads.features import curve_lengths, feature_problems, region_areas
+from ufl_frames.quads.features import (
+    chord_allowances,
+    curve_lengths,
+    feature_problems,
+    region_areas,
+)
 from ufl_frames.quads.measures import check_quad_mesh, quad_quality
 
 RTOL = 5e-3
@@ -243,3 +248,27 @@ def test_without_features_nothing_changes():
     assert mesh.features is None
     assert quads.quad_region is None and quads.curve_edges is None
     assert quads.num_quads == 70  # the 10 × 7 grid
+
+
+def test_a_chord_across_smooth_joints_is_allowed_the_turn_of_the_curves_under_it():
+    """A quad edge from angle 0 to 60° on the unit circle, over a polyline of five 12°
+    segments, each its own curve, joined by smooth joints (a polyline's vertices): its
+    allowance is that of a chord of length ℓ = 1 whose ends' segments turn by
+    θ = 54° − 6° = 48° (``chord_allowances``: twice ℓθ²/24 for the curve, twice ℓ²θ/12
+    for the quad's region), counted for the chain (the smallest tag), not 0 as the one
+    segment under the edge's middle alone would give."""
+    t = np.radians(12.0) * np.arange(6)
+    x = np.stack([np.cos(t), np.sin(t)], axis=1)
+    features = Features(cell_region=np.zeros(1, dtype=np.int64),
+                        curve_edges=np.stack([np.arange(5), np.arange(1, 6)], axis=1),
+                        edge_curve=np.arange(1, 6), point_nodes=np.arange(6),
+                        point_tag=np.arange(1, 7), joints=np.arange(1, 5))
+    points = np.array([x[0], x[5], 0.5 * x[5], 0.5 * x[0]])
+    quad_mesh = extract.QuadMesh(points=points, quads=np.array([[3, 0, 1, 2]]), chains={},
+                                 boundary=np.zeros((0, 2), dtype=np.int64),
+                                 quad_region=np.array([7]), curve_edges=np.array([[0, 1]]),
+                                 edge_curve=np.array([3]))
+    areas, lengths = chord_allowances(quad_mesh, x, features)
+    theta = np.radians(48.0)
+    assert lengths == pytest.approx({1: 2 * theta**2 / 24})
+    assert areas == pytest.approx({7: 2 * theta / 12})

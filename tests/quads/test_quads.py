@@ -197,6 +197,56 @@ def test_improving_the_worst_quads_restores_a_skewed_grid_and_never_worsens():
         assert check_quad_mesh(after, q, area=1.0) == []
 
 
+def _disk_fan(n=64):
+    """The unit disk as n triangles around its centre (node 0): its boundary a regular
+    n-gon with a vertex at angle 0."""
+    t = 2 * np.pi * np.arange(n) / n
+    x = np.concatenate([[[0.0, 0.0]], np.stack([np.cos(t), np.sin(t)], axis=1)])
+    k = np.arange(n)
+    return x, np.stack([np.zeros(n, dtype=int), 1 + k, 1 + (k + 1) % n], axis=1)
+
+
+def test_a_free_boundary_vertex_goes_where_its_edges_follow_the_boundary_best():
+    """``onto_boundary``: a quad mesh of the unit disk (a square in the middle, eight quads
+    around it, their outer vertices on the circle every 45°). The outer vertex at angle 0
+    moved inside the disk, or along the circle to 22.5°, goes back to (1, 0): the middle
+    of the arc between its neighbours at ±45°, where its two chords are longest together.
+    On a straight boundary (a 2 × 1 box) a boundary vertex stays where it is along it, and
+    one moved inside is put back onto it straight below. The mesh stays valid."""
+    from ufl_frames.quads.improve import onto_boundary
+
+    tri_x, tri_cells = _disk_fan()
+    a = np.pi / 4 * np.arange(8)
+    inner = 0.4 * np.stack([np.cos(a), np.sin(a)], axis=1) / np.maximum(
+        np.abs(np.cos(a)), np.abs(np.sin(a)))[:, None]
+    points = np.concatenate([[[0.0, 0.0]], inner, np.stack([np.cos(a), np.sin(a)], axis=1)])
+    k = np.arange(8)
+    quads = np.concatenate([
+        np.stack([np.zeros(4, dtype=int), 1 + 2 * k[:4], 1 + (2 * k[:4] + 1) % 8,
+                  1 + (2 * k[:4] + 2) % 8], axis=1),
+        np.stack([1 + k, 9 + k, 9 + (k + 1) % 8, 1 + (k + 1) % 8], axis=1)])
+    assert check_quad_mesh(points, quads) == []
+    for moved in ([0.75, 0.05], [np.cos(np.pi / 8), np.sin(np.pi / 8)]):
+        start = points.copy()
+        start[9] = moved
+        placed = onto_boundary(start, quads, [9], tri_x, tri_cells)
+        assert placed[9] == pytest.approx([1.0, 0.0], abs=1e-12)
+        assert np.array_equal(np.delete(placed, 9, axis=0), np.delete(start, 9, axis=0))
+        assert check_quad_mesh(placed, quads) == []
+    # a 2 × 1 box, triangles of a 4 × 2 grid; quads: two unit squares
+    X, Y = np.meshgrid(np.linspace(0, 2, 5), np.linspace(0, 1, 3), indexing="ij")
+    box = np.stack([X.ravel(), Y.ravel()], axis=1)
+    i = np.arange(15).reshape(5, 3)
+    box_cells = np.concatenate([np.stack([i[:-1, :-1], i[1:, :-1], i[1:, 1:]], -1).reshape(-1, 3),
+                                np.stack([i[:-1, :-1], i[1:, 1:], i[:-1, 1:]], -1).reshape(-1, 3)])
+    squares = np.array([[0.0, 0.0], [0.7, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [0.0, 1.0]])
+    two = np.array([[0, 1, 4, 5], [1, 2, 3, 4]])
+    assert onto_boundary(squares, two, [1], box, box_cells)[1] == pytest.approx([0.7, 0.0])
+    inside = squares.copy()
+    inside[1] = [0.7, 0.1]
+    assert onto_boundary(inside, two, [1], box, box_cells)[1] == pytest.approx([0.7, 0.0])
+
+
 def test_every_integer_point_of_the_map_is_one_quad_corner():
     """An independent count: the integer points of the fixed-point map found by brute force
     (every lattice point of each triangle's box, exact orientation tests), named by where

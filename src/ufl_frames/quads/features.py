@@ -266,13 +266,20 @@ def chord_allowances(quad_mesh, x, features: Features) -> tuple[dict, dict]:
     """How much the quads' area per region and their length per curve may differ from the
     triangles' because a quad edge on a curve is a chord of the triangles' polyline there:
     twice the area ℓ²θ/12 and the length ℓθ²/24 of a circular arc of chord ℓ turning by θ,
-    θ the angle between the triangle edges under the quad edge's two ends. Returns
+    θ the angle between the triangle edges under the quad edge's two ends. Curves joined
+    by smooth joints count as one (a quad edge across a joint has its ends on two of them):
+    their lengths under the chain's smallest tag
+    (:meth:`~ufl_frames.param.features.Features.curve_chains`). Returns
     ({region: area}, {curve: length})."""
     points = np.asarray(quad_mesh.points)[:, :2]
     edges = np.asarray(quad_mesh.curve_edges, dtype=np.int64).reshape(-1, 2)
     curve_of = np.asarray(quad_mesh.edge_curve, dtype=np.int64)
     tri_edges = np.asarray(features.curve_edges, dtype=np.int64).reshape(-1, 2)
     tri_curve = np.asarray(features.edge_curve, dtype=np.int64)
+    if len(features.joints):
+        chains = features.curve_chains()
+        curve_of, tri_curve = (np.array([chains.get(int(c), int(c)) for c in tags],
+                                        dtype=np.int64) for tags in (curve_of, tri_curve))
     areas: dict[int, float] = {}
     lengths: dict[int, float] = {}
     if edges.size == 0:

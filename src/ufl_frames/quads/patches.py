@@ -13,7 +13,11 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    a kept patch with two corners on one point, or glue singular vertices to the boundary
    where the quads left there would not make a valid fan (:meth:`_Points.valid_fan`: the
    domain's angle there shared by the quads, each within :data:`FAN_ANGLES`), the arcs
-   collapsed there get at least 1 and the program is solved again (until none does). So
+   collapsed there get at least 1 and the program is solved again (until none does).
+   Interior curves' arcs keep a length; an arc at a model point may collapse (a trace
+   passing a fraction of a quad from a corner, the airfoil's trailing edge say, goes
+   through it), the model point staying where it is, but not so as to glue it to another
+   model or curve point or to another boundary point (:meth:`_Points.bad_merges`). So
    a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
    goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
    its separatrices and the boundary collapse: no sliver layer); a valence-3 one (turn
@@ -28,7 +32,13 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    (straight segments in the patch's chart, across seams). Arc points are computed once,
    so the patches that share an arc share its points: the quads are conforming; points
    glued by a collapse become one (a boundary corner's, else the boundary's, else the
-   singular vertex's, else their mean).
+   singular vertex's, else their mean). Where that point has no one place on the
+   boundary (singular vertices glued to it, or several boundary points or corners glued,
+   none a model or curve point), it goes on the boundary between its two boundary
+   neighbours where its two quad edges follow it best
+   (:func:`~ufl_frames.quads.improve.onto_boundary`): at a round nose a fraction of a
+   quad wide, whose thin patches collapse and glue its −1/4 singular vertices to it, the
+   nose's tip.
 
 Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map (of one or
 more connected components: each has its own patches).
@@ -44,6 +54,7 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 from ufl_frames.param.seamless import Parametrisation, folded
 from ufl_frames.quads.charts import UNIT, LayoutError
 from ufl_frames.quads.extract import QuadMesh, with_features
+from ufl_frames.quads.improve import onto_boundary
 from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
 from ufl_frames.quads.motorcycles import rot
 
@@ -113,12 +124,8 @@ def integer_lengths(lay: Layout, weights=None,
     L = lay.lengths()
     w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
     lower = np.where(L < collapse_below, 0.0, 1.0)
-    # the features' curves and the arcs at their model points keep a length: a collapse
-    # would glue two of them
-    model = {k for k, key in enumerate(lay.nodes)
-             if key[0] == "v" and key[1] in lay.motorcycles.model_nodes}
-    lower[[a for a, arc in enumerate(lay.arcs)
-           if arc.curve or arc.start in model or arc.end in model]] = 1.0
+    # the features' curves keep a length: a collapse would glue two of their points
+    lower[[a for a, arc in enumerate(lay.arcs) if arc.curve]] = 1.0
     for _ in range(L.size + 1):
         n = _solve(lay, lower, w)
         points = _Points(lay, n)
@@ -544,6 +551,18 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
     np.add.at(sums, root[chosen], xy[chosen])
     counts = np.bincount(root[chosen], minlength=total)
     points = sums[used] / counts[used, None]
+    # singular vertices glued to the boundary (no corner there), or boundary points
+    # (corners) glued together, with no model point or curve point: the boundary point
+    # they make has no one place in the map (the mean of the boundary points is off a
+    # curved boundary): it goes where its edges follow the boundary best
+    special = np.zeros(total, dtype=bool)
+    special[list(pts.curve_ids() | pts.model_ids())] = True
+    pinned, fan = np.zeros(total, dtype=bool), np.zeros(total, dtype=bool)
+    np.logical_or.at(pinned, root, special)
+    np.logical_or.at(fan, root, rank == 3)
+    free = (((best[used] == 1) & fan[used]) | ((best[used] <= 1) & (counts[used] > 1))) \
+        & ~pinned[used]
+    points = onto_boundary(points, quads, np.flatnonzero(free), mc.mesh.x, mc.mesh.cells)
     a, b = quads.ravel(), np.roll(quads, -1, axis=1).ravel()
     m = points.shape[0]
     pairs, counts = np.unique(np.minimum(a, b) * m + np.maximum(a, b), return_counts=True)
