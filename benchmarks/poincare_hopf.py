@@ -15,9 +15,10 @@ the expected sum (corners rounded to quarter turns; ``+k/4`` when k corners are 
 2° of an odd multiple of 45°, where either rounding is right), whether they agree, the
 index the interior curves' junctions force (``junction``: part of the sum), the loader's
 note on the local feature size (``capped``: boundary points whose size it lowered) and
-the whole run's wall and CPU seconds (CPU: the solve's process and what it waited for). A failed run shows ``error``/``crash``/``timeout`` and its last
-line. The solves use the ``ufl_frames`` the interpreter imports (``PYTHONPATH=OTHER/src``
-measures another checkout).
+the whole run's wall and CPU seconds (CPU: the solve's process and what it waited
+for). A failed run shows ``error``/``crash``/``timeout`` and its last line. The solves
+use the ``ufl_frames`` the interpreter imports (``PYTHONPATH=OTHER/src`` measures
+another checkout).
 """
 
 import argparse
