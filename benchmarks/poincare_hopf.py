@@ -16,14 +16,16 @@ squeezed quad corner; ``+k/4`` when k corners are within 2° of 135°, 225° or 
 either rounding is right), whether they agree, the
 index the interior curves' junctions force (``junction``: part of the sum), the loader's
 note on the local feature size (``capped``: boundary points whose size it lowered) and
-the whole run's seconds. A failed run shows ``error``/``crash``/``timeout`` and its last
-line. The solves use the ``ufl_frames`` the interpreter imports (``PYTHONPATH=OTHER/src``
-measures another checkout).
+the whole run's wall and CPU seconds (CPU: the solve's process and what it waited
+for). A failed run shows ``error``/``crash``/``timeout`` and its last line. The solves
+use the ``ufl_frames`` the interpreter imports (``PYTHONPATH=OTHER/src`` measures
+another checkout).
 """
 
 import argparse
 import json
 import re
+import resource
 import sys
 import tempfile
 from pathlib import Path
@@ -40,8 +42,11 @@ def _row(path: Path, timeout: float, max_it: int) -> dict:
         out = Path(tmp) / "out"
         cmd = [sys.executable, "-m", "ufl_frames.app", "solve", str(path), "--out", str(out),
                "--force", "-q", "--max-it", str(max_it)]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         rc, _, err, seconds = run_in_group(cmd, timeout)
-        row = {"file": path.name, "seconds": seconds}
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+        row = {"file": path.name, "seconds": seconds, "cpu_seconds": cpu}
         summary = out / "summary.json"
         if rc is None:
             return {**row, "status": "timeout"}
@@ -67,7 +72,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
     header = (f"{'file':34s} {'triangles':>9s} {'capped':>6s} {'sum':>6s} {'expected':>10s} "
-              f"{'junction':>8s} {'ok':>3s} {'s':>7s}")
+              f"{'junction':>8s} {'ok':>3s} {'s':>7s} {'cpu s':>7s}")
     print(header, flush=True)
     rows = []
     for path in args.files:
@@ -75,12 +80,13 @@ def main(argv=None) -> int:
         rows.append(row)
         if row["status"] != "ok":
             print(f"{row['file']:34s} {row['status']}: {row.get('last', '')} "
-                  f"({row['seconds']:.0f} s)", flush=True)
+                  f"({row['seconds']:.0f} s, {row['cpu_seconds']:.0f} CPU s)", flush=True)
             continue
         expected = f"{row['expected']:g}" + (f"+{row['ambiguous']}/4" if row["ambiguous"] else "")
         print(f"{row['file']:34s} {row['triangles']:9d} {row['capped']:6d} "
               f"{row['index_sum']:6g} {expected:>10s} {row['junction']:8g} "
-              f"{'yes' if row['agrees'] else 'NO':>3s} {row['seconds']:7.1f}", flush=True)
+              f"{'yes' if row['agrees'] else 'NO':>3s} {row['seconds']:7.1f} "
+              f"{row['cpu_seconds']:7.1f}", flush=True)
     solved = [r for r in rows if r["status"] == "ok"]
     agree = [r for r in solved if r["agrees"]]
     unsolved = ", ".join(f"{r['file']} ({r['status']})" for r in rows if r["status"] != "ok")

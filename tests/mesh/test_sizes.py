@@ -81,6 +81,23 @@ def test_uniform_callable_and_samples():
     assert target(np.array([[2.0, 2.0], [0.0, 0.0]]))[0] == pytest.approx(math.exp(2.0))
 
 
+def test_samples_along_curves_interpolate_exactly():
+    """Samples as a file's sizes come: many collinear points along a square's sides and
+    cocircular ones on a circle (Qhull's degenerate case, triangulated joggled); a linear
+    log h = x + 2y is reproduced inside, whichever triangulation is chosen, and the same
+    on a second call (the triangulation kept)."""
+    t = np.linspace(0, 1, 400, endpoint=False)
+    square = np.concatenate([np.column_stack([t, 0 * t]), np.column_stack([1 + 0 * t, t]),
+                             np.column_stack([1 - t, 1 + 0 * t]), np.column_stack([0 * t, 1 - t])])
+    angle = 2 * np.pi * t
+    circle = 0.5 + 0.3 * np.column_stack([np.cos(angle), np.sin(angle)])
+    points = np.vstack([square, circle])
+    target = SizeTarget.of_samples(np.column_stack([points, np.exp(points @ [1.0, 2.0])]))
+    query = np.random.default_rng(3).uniform(0.01, 0.99, (500, 2))
+    assert np.allclose(target(query), np.exp(query @ [1.0, 2.0]), rtol=1e-9)
+    assert np.array_equal(target(query), target(query))
+
+
 def test_quad_count_factor():
     """h = 1 on the unit square: N quads of side 1/√N, so the factor is 1/√N; with
     h = 1 + x (∫ 1/h² over the square = 1/2) the factor is √(1/(2N))."""
