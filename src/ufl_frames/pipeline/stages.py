@@ -15,6 +15,7 @@ same :class:`~ufl_frames.param.cut.CutMesh`. Each stage is
 collective and returns a frozen record whose measures are the same on every rank.
 """
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -70,7 +71,6 @@ class RootField:
     def __init__(self, frames: FrameField):
         from ufl_frames.param.features import with_smooth_joints
         from ufl_frames.param.gather import gather_features, gather_field
-        from ufl_frames.param.pairs import absorb_at_acute_corners
 
         self.domain = frames.domain
         self._arrays = gather_field(frames.q)  # (x, cells, rows) on rank 0
@@ -80,9 +80,16 @@ class RootField:
                 self.features, self._arrays[0], self._arrays[1],
                 getattr(frames.domain, "physical_groups", ()))
         self._cuts = {}
-        # corners under 45°: their −1/4 singular vertex moved into them, for the map
-        self.corners = None if self._arrays[0] is None else absorb_at_acute_corners(
-            self._arrays[0], self._arrays[1], self._arrays[2], self.features)
+
+    @functools.cached_property
+    def corners(self):
+        """The corners under 45° with their −1/4 singular vertex moved into them, for the
+        map (:func:`~ufl_frames.param.pairs.absorb_at_acute_corners`; rank 0, None
+        elsewhere), made on first use."""
+        from ufl_frames.param.pairs import absorb_at_acute_corners
+
+        x, cells, rows = self._arrays
+        return None if x is None else absorb_at_acute_corners(x, cells, rows, self.features)
 
     def _cut_mesh(self, quad_size=None, quad_count=None):
         """(the cut mesh, the :class:`~ufl_frames.param.pairs.RemovedPairs`) at this quad
