@@ -16,6 +16,7 @@ percentiles), the irregular vertices (:func:`ufl_frames.quads.measures.quad_qual
 the worst scaled Jacobian. One process; prints a table, asserts nothing.
 
     .venv/bin/python benchmarks/sizes.py [--files F ...] [--quads 400] [--timeout 600]
+        [--size-weight W]
 """
 
 import argparse
@@ -81,12 +82,14 @@ def measure(mesh, target) -> dict:
             "min_sj": quality["min_sj"]}
 
 
-def ours(path: Path, quads: int, timeout: float) -> tuple[dict | str, float]:
+def ours(path: Path, quads: int, timeout: float, weight: float | None = None
+         ) -> tuple[dict | str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out"
         start = time.perf_counter()
         done = subprocess.run([sys.executable, "-m", "ufl_frames.app", "solve", str(path),
-                               "--quads", "--quad-count", str(quads), "--out", str(out), "-q"],
+                               "--quads", "--quad-count", str(quads), "--out", str(out), "-q",
+                               *([] if weight is None else ["--size-weight", str(weight)])],
                               capture_output=True, text=True, timeout=timeout,
                               env={**os.environ, "PYTHONPATH": str(ROOT / "src"),
                                    "OMP_NUM_THREADS": "1"})
@@ -120,6 +123,8 @@ def main() -> None:
                                                        for f in FILES])
     parser.add_argument("--quads", type=int, default=400)
     parser.add_argument("--timeout", type=float, default=600)
+    parser.add_argument("--size-weight", type=float, default=None,
+                        help="w of the sized energy (ufl-frames' --size-weight; default its own)")
     args = parser.parse_args()
     from ufl_frames.mesh.sizes import SizeTarget, read_file_sizes
 
@@ -131,7 +136,7 @@ def main() -> None:
         path = Path(name)
         target = SizeTarget.of_samples(read_file_sizes(str(path)))
         rows = []
-        found, seconds = ours(path, args.quads, args.timeout)
+        found, seconds = ours(path, args.quads, args.timeout, args.size_weight)
         rows.append(("ufl-frames", found if isinstance(found, str)
                      else measure(found["mesh"], target), seconds))
         mesh, _, seconds = gmsh_quasi_structured(path, args.quads)

@@ -152,3 +152,49 @@ def test_bad_sizes_are_refused_in_one_line(shared_tmp, capsys, args):
     assert "Traceback" not in "\n".join(err)
     assert not any("internal error" in line for line in errors), errors
     assert not (shared_tmp / "out").exists()
+
+
+def test_stage_size_record_measures_each_stage_apart():
+    """stage_size_record on a known case: frames of exactly h (no spread), a map whose
+    cells are twice h's on the right half (every quad log 2 / 2 from the median), quads
+    of one size against h = 1 | e (every quad ½ from the median)."""
+    from types import SimpleNamespace
+
+    from ufl_frames.pipeline.sizes import stage_size_record
+
+    nx, ny = 6, 5  # x = 0.5 is a grid line; no quad centroid on a triangle's edge
+    gx, gy = np.meshgrid(np.linspace(0, 1, nx + 1), np.linspace(0, 1, ny + 1), indexing="ij")
+    x = np.column_stack([gx.ravel(), gy.ravel()])
+    v = np.arange((nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+    a, b, c, d = v[:-1, :-1].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel(), v[:-1, 1:].ravel()
+    cells = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+    def h(px, py):
+        return np.where(px < 0.5, 1.0, np.e)
+
+    right = x[cells].mean(axis=1)[:, 0] > 0.5
+    h_cells = np.where(right, np.e, 1.0)
+    scale = 3.0
+    mesh = SimpleNamespace(x=x, cells=cells, l1=scale * h_cells, l2=scale * h_cells)
+    cell = np.where(right, 2.0, 1.0) * h_cells  # the map's cells: 2h on the right
+    zeros = np.zeros_like(cell)
+    seamless_map = SimpleNamespace(scale=scale, grad_u=np.column_stack([1 / cell, zeros]),
+                                   grad_v=np.column_stack([zeros, 1 / cell]))
+    qx, qy = np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5), indexing="ij")
+    w = np.arange(25).reshape(5, 5)
+    quads = np.column_stack([w[:-1, :-1].ravel(), w[1:, :-1].ravel(), w[1:, 1:].ravel(),
+                             w[:-1, 1:].ravel()])
+    quad_mesh = SimpleNamespace(points=np.column_stack([qx.ravel(), qy.ravel()]), quads=quads)
+
+    found = stage_size_record(mesh, seamless_map, quad_mesh, SizeTarget.of_function(h))
+    assert found["located"] == found["count"] == 16
+    assert found["field"]["p90_abs_log"] == pytest.approx(0.0, abs=1e-12)
+    assert found["field"]["log_correlation"] == pytest.approx(1.0)
+    for key in ("map", "map_over_field"):
+        assert found[key]["median_abs_log"] == pytest.approx(0.5 * np.log(2.0))
+        assert found[key]["p90_abs_log"] == pytest.approx(0.5 * np.log(2.0))
+    assert found["quads"]["median_abs_log"] == pytest.approx(0.5)
+    assert found["quads"]["log_correlation"] is None  # every quad of one size
+    assert found["quads_over_map"]["p90_abs_log"] == pytest.approx(0.5 * (1 + np.log(2.0)))
+    again = quad_size_record(quad_mesh, SizeTarget.of_function(h))
+    assert again["p90_abs_log"] == pytest.approx(found["quads"]["p90_abs_log"])

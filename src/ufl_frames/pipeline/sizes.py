@@ -9,7 +9,7 @@ quad's its mean edge length, each divided by h there and by the median of that r
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["quad_size_record", "size_record"]
+__all__ = ["quad_size_record", "size_record", "stage_size_record"]
 
 
 def _spread(log_ratio: np.ndarray) -> dict:
@@ -93,4 +93,50 @@ def quad_size_record(quad_mesh, target, quad_count: int | None = None) -> dict:
     if quad_count is not None:
         record["requested"] = int(quad_count)
         record["count_error"] = (len(cells) - quad_count) / quad_count
+    return record
+
+
+def stage_size_record(mesh, seamless_map, quad_mesh, target) -> dict:
+    """Where the quads' sizes leave the target: the local edge length of each stage at the
+    quads' centroids, against h there, each up to its own global factor (rank 0's arrays).
+
+    * ``field``: the combed frame's (l1 + l2)/(2s) on the cut mesh's triangle holding the
+      centroid (the map's input: the field, its close ± pairs removed);
+    * ``map``: the seamless map's (1/|∇U| + 1/|∇V|)/2 there (a unit cell of (U, V));
+    * ``quads``: the quad's mean edge length (as :func:`quad_size_record`).
+
+    Each is a dict of ``log_correlation``, ``median_abs_log`` and ``p90_abs_log``
+    (``count`` the quads, ``located`` those whose centroid lies in a triangle); the
+    steps ``map_over_field`` and ``quads_over_map`` give the spread of one stage's log size
+    against the one before (up to a factor), so the widening each adds is measured apart.
+
+    Args:
+        mesh: the :class:`~ufl_frames.param.cut.CutMesh` the map was made on.
+        seamless_map: its :class:`~ufl_frames.param.seamless.Parametrisation`.
+        quad_mesh: the quads (``points``, ``quads``).
+        target: the :class:`~ufl_frames.mesh.sizes.SizeTarget`.
+    """
+    from ufl_frames.quads.features import locate
+
+    corners = quad_mesh.points[quad_mesh.quads]
+    centroids = corners.mean(axis=1)
+    cells = locate(mesh.x[:, :2], mesh.cells, centroids)
+    inside = cells >= 0
+    cells, centroids, corners = cells[inside], centroids[inside], corners[inside]
+    s = seamless_map.scale
+    logs = {
+        "field": np.log(0.5 * (mesh.l1[cells] + mesh.l2[cells]) / s),
+        "map": np.log(0.5 * (1.0 / np.linalg.norm(seamless_map.grad_u[cells], axis=1)
+                             + 1.0 / np.linalg.norm(seamless_map.grad_v[cells], axis=1))),
+        "quads": np.log(np.linalg.norm(np.roll(corners, -1, axis=1) - corners,
+                                       axis=2).mean(axis=1)),
+    }
+    log_h = np.log(target(centroids))
+    record = {"located": int(inside.sum()), "count": int(len(inside))}
+    for name, log_edge in logs.items():
+        varied = np.std(log_h) > 1e-12 and np.std(log_edge) > 1e-12
+        record[name] = {"log_correlation": float(np.corrcoef(log_edge, log_h)[0, 1])
+                        if varied else None, **_spread(log_edge - log_h)}
+    record["map_over_field"] = _spread(logs["map"] - logs["field"])
+    record["quads_over_map"] = _spread(logs["quads"] - logs["map"])
     return record
