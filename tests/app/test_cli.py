@@ -169,6 +169,21 @@ def test_quads_size_the_triangles(shared_tmp, capsys):
     assert kept["requested_mesh_size"] == 0.08
 
 
+def test_a_size_from_the_quads_resolves_the_shape():
+    """The triangles' size taken from the quads' (``solve --quads --quad-size`` without
+    ``--mesh-size``, and ``ufl-frames mesh``) is still capped by the local feature size
+    (``resolve_features``); a ``--mesh-size`` the user gives is not."""
+    from ufl_frames.app.run import sized_for_quads
+
+    config, sized = sized_for_quads(RunConfig("shape.geo", conformal=True, quads=True,
+                                              quad_size=0.1))
+    assert sized and config.mesh_size == 0.1 and config.resolve_features
+    config, sized = sized_for_quads(RunConfig("shape.geo", conformal=True, quads=True,
+                                              quad_size=0.1, mesh_size=0.08))
+    assert not sized and not config.resolve_features
+    assert RunConfig.for_mesh("shape.geo", quad_size=0.1).resolve_features
+
+
 def test_progress_lines(shared_tmp, capsys):
     run(RunConfig("annulus", mesh_size=0.2, max_it=3, out=shared_tmp / "o"), comm=COMM)
     lines = capsys.readouterr().out.splitlines()

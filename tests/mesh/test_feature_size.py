@@ -166,6 +166,10 @@ def test_a_thin_neck_gets_three_elements_across_at_the_default_size(tmp_path):
     explicit = load(COMM, path, mesh_size=0.048)
     assert np.median(neck_edges(explicit, 1.3, 1.7, 0.475, 0.525)) > w / 2
     assert not any("local feature size" in note for note in explicit.notes)
+    # A size taken from the quads' (``resolve_features``) is capped as the default is.
+    resolved = load(COMM, path, mesh_size=0.048, resolve_features=True)
+    assert np.median(neck_edges(resolved, 1.3, 1.7, 0.475, 0.525)) <= 1.25 * w / ELEMENTS_ACROSS
+    assert any("local feature size" in note for note in resolved.notes)
     # Away from the neck the default size is the automatic one (about 2000 triangles).
     far = neck_edges(default, 0.2, 0.6, 0.2, 0.8)
     assert np.median(far) > 0.5 * 0.048

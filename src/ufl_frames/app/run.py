@@ -94,6 +94,10 @@ class RunConfig:
     #: where it sets any, else uniform); ``--size-weight`` (None: the default w).
     size: str | None = None
     size_weight: float | None = None
+    #: ``mesh_size`` is the quads' size, not one the user asked for: the triangles are
+    #: still capped where the shape is thin or tightly curved (``resolve_features`` of
+    #: :func:`ufl_frames.mesh.load`).
+    resolve_features: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "geometry", str(self.geometry))
@@ -125,7 +129,7 @@ class RunConfig:
         sized = size not in (None, "none")
         return cls(geometry=geometry, conformal=not sized, size=size if sized else None,
                    levels=1, quads=True, quad_size=quad_size, quad_count=quad_count,
-                   mesh_size=quad_size, field_files=False, on_cad=True,
+                   mesh_size=quad_size, resolve_features=True, field_files=False, on_cad=True,
                    adapt_quad_size=quad_size is None and quad_count is None, **options)
 
     @property
@@ -308,7 +312,7 @@ def sized_for_quads(config: RunConfig) -> tuple[RunConfig, bool]:
     if config.geometry in KNOWN_GEOMETRIES:  # their default is known: never coarser
         if config.quad_size >= BUILTIN_MESH_SIZE:
             return config, False
-    return replace(config, mesh_size=config.quad_size), True
+    return replace(config, mesh_size=config.quad_size, resolve_features=True), True
 
 
 def estimated_quads(area: float, quad_size: float) -> float:
@@ -501,6 +505,8 @@ def _mesh(config: RunConfig, comm, say) -> tuple[list, object]:
     say(f"meshing {config.geometry} ({size}) ...")
     limit = {} if config.max_triangles is None else {"max_triangles": config.max_triangles}
     limit["time_limit"] = config.mesh_time_limit
+    if config.resolve_features:
+        limit["resolve_features"] = True
     interrupts.set_stage("meshing")
     size_factor = config.size_factor
     try:

@@ -24,6 +24,7 @@ def build(
     max_triangles: int = MAX_TRIANGLES,
     time_limit: float | None = None,
     refinements: int = 0,
+    resolve_features: bool = False,
 ) -> Domain:
     """A built-in geometry by name (:data:`KNOWN_GEOMETRIES`) or a file for :func:`load`.
 
@@ -39,6 +40,7 @@ def build(
             into 4, k times (new boundary points on the curves): the mesh is then a
             refinement of the one ``size_factor`` · 2^k and ``refinements`` 0 give, as
             :func:`build_nested` needs.
+        resolve_features: As for :func:`load` (files only).
 
     Returns:
         The distributed domain.
@@ -59,7 +61,7 @@ def build(
     is_file = (looks_like_file or path.exists()) if comm.rank == 0 else None
     if comm.bcast(is_file, root=0):
         return load(comm, path, mesh_size, size_factor, max_triangles, time_limit,
-                    refinements)
+                    refinements, resolve_features)
     raise GeometryError(
         f"unknown geometry {key!r}: not a file; known names are "
         f"{', '.join(sorted(KNOWN_GEOMETRIES))}"
@@ -74,6 +76,7 @@ def build_nested(
     size_factor: float = 1.0,
     max_triangles: int = MAX_TRIANGLES,
     time_limit: float | None = None,
+    resolve_features: bool = False,
 ) -> list[Domain]:
     """``levels`` nested meshes of one geometry, coarse to fine.
 
@@ -94,6 +97,7 @@ def build_nested(
         size_factor: As for :func:`build`, of the finest level.
         max_triangles: As for :func:`build`.
         time_limit: As for :func:`build`, for each level.
+        resolve_features: As for :func:`build`.
 
     Returns:
         The domains, coarsest first.
@@ -101,4 +105,5 @@ def build_nested(
     if isinstance(levels, bool) or not isinstance(levels, numbers.Integral) or levels < 1:
         raise GeometryError(f"levels must be a positive integer, got {levels!r}")
     return [build(comm, name_or_path, mesh_size, size_factor * 2.0 ** (levels - 1 - k),
-                  max_triangles, time_limit, refinements=k) for k in range(levels)]
+                  max_triangles, time_limit, refinements=k, resolve_features=resolve_features)
+            for k in range(levels)]

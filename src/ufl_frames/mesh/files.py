@@ -95,6 +95,7 @@ def load(
     max_triangles: int = MAX_TRIANGLES,
     time_limit: float | None = None,
     refinements: int = 0,
+    resolve_features: bool = False,
 ) -> Domain:
     """Domain from a ``.geo``, ``.msh``, ``.step``/``.stp`` or ``.brep`` file.
 
@@ -121,6 +122,9 @@ def load(
             seconds, with :class:`~ufl_frames.mesh.domain.MeshTimeLimit` (default
             :func:`mesh_time_limit`; ``math.inf``: in this process, no limit).
         refinements: As for :func:`~ufl_frames.mesh.build` (not for a ``.msh``).
+        resolve_features: With ``mesh_size``, still cap the size where the shape is thin
+            or tightly curved (:mod:`~ufl_frames.mesh.feature_size`), as without it: for
+            a size taken from the quads', not one the user asked for.
 
     Returns:
         The distributed domain.
@@ -167,7 +171,7 @@ def load(
             raise GeometryError(f"{source!r} defines no 2D surface")
         _into_own_plane(source, notes)
         check_crossings(source)
-        return mesh_model(Sizing(h, factor, limit, refinements), notes)
+        return mesh_model(Sizing(h, factor, limit, refinements, resolve_features), notes)
 
     return create(comm, make, source, cad=ext not in MESH_EXTENSIONS, time_limit=seconds)
 

@@ -108,7 +108,7 @@ def nested_domains(comm, name_or_path: str, domain, levels="auto", mesh_size=Non
             coarsening there (with ``nested_meshes``: one level fewer) instead of raising;
             None: where ``levels`` is 'auto'.
         say: called with a line of progress (a level being meshed, a level dropped).
-        **limit: ``max_triangles`` and ``time_limit`` for
+        **limit: ``max_triangles``, ``time_limit`` and ``resolve_features`` for
             :func:`~ufl_frames.mesh.build`.
 
     Returns:

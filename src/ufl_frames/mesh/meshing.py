@@ -58,6 +58,10 @@ class Sizing:
     factor: float = 1.0
     max_triangles: float = MAX_TRIANGLES
     refinements: int = 0
+    #: cap an absolute ``h`` too where the shape is thin or tightly curved
+    #: (:mod:`ufl_frames.mesh.feature_size`): a size derived from the quads', not one the
+    #: user asked for
+    resolve: bool = False
 
 
 def _unite_surfaces(notes: list[str]) -> None:
@@ -401,7 +405,8 @@ def mesh_model(sizing: Sizing, notes: list[str]) -> float | None:
         else:
             h = sizing.h * sizing.factor
         estimate = area / (_EQUILATERAL * h * h)
-        if sizing.h is None:  # the default size resolves the shape; an explicit one is kept
+        capped = sizing.h is None or sizing.resolve  # an explicit size is kept as asked
+        if capped:  # the default size resolves the shape
             field, caps, step = feature_size.measure(automatic_size)
             estimate += feature_size.extra_triangles(sizing.factor * caps, step, h)
         if estimate > sizing.max_triangles:
@@ -413,7 +418,7 @@ def mesh_model(sizing: Sizing, notes: list[str]) -> float | None:
         while estimate / 4**(refinements + automatic) > REFINE_ABOVE:
             automatic += 1
         gmsh.option.setNumber("Mesh.MeshSizeMax", h * 2**(refinements + automatic))
-        if sizing.h is None:
+        if capped:
             feature_size.install(field, sizing.factor * 2**(refinements + automatic), notes)
     try:
         gmsh.model.mesh.generate(2)
