@@ -504,9 +504,8 @@ def _conformal_lengths(x, cells, triangles, verts, values):
 
     index = -np.ones(x.shape[0], dtype=np.int64)
     index[verts] = np.arange(verts.size)
-    local = index[cells[triangles]]
-    area, grad = gradients(x[verts], local)  # (t,), (t, 3, 2): true gradients
-    area = np.abs(area)  # either orientation
+    local = index[cells[triangles]]  # counter-clockwise
+    area, grad = gradients(x[verts], local)  # (t,), (t, 3, 2)
     t = values[local, 0]
     delta = 0.5 * (values[local, 2] - values[local, 1])  # (a − b)/2
     grad_t = np.einsum("ti,tik->tk", t, grad)
