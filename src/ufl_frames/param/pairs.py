@@ -464,7 +464,6 @@ def absorb_at_acute_corners(x, cells, q, features: Features | None = None) -> Ab
             kept.append(dict(entry, why=lifted))
             continue
         verts, values = lifted
-        values = _conformal_lengths(x, cells, patch[1], verts, values)
         trial = q_new.copy()
         free = patch[0]
         inner = values[np.searchsorted(verts, free)]
@@ -483,60 +482,6 @@ def absorb_at_acute_corners(x, cells, q, features: Features | None = None) -> Ab
         q_new, current, given = trial, expected, trial_given
         absorbed.append(entry)
     return AbsorbedCorners(q=q_new, frames=given, absorbed=tuple(absorbed), kept=tuple(kept))
-
-
-def _conformal_lengths(x, cells, triangles, verts, values):
-    r"""``values`` (the patch's (angle, log l1, log l2) at ``verts``) with the log lengths
-    made those of an integrable field of the patch's angles: its map's gradients
-    s e1/l1, s e2/l2 are curl-free iff, with a = −log l1 = φ + δ and b = −log l2 = φ − δ,
-
-        ∇φ = R∇t + (∇δ·e1) e1 − (∇δ·e2) e2,      R(p, q) = (−q, p)
-
-    (δ = 0: the conformal scale of :mod:`ufl_frames.fem.conformal`). δ stays the harmonic
-    one; φ is the P1 least-squares solution (a Poisson problem, the exact P1 stiffness)
-    with the rim's values where the patch meets the rest of the mesh and the natural
-    condition on the domain's boundary. So at an acute corner that holds a quarter turn
-    (the angle turning by 90° − α across the gap, t ≈ (1 − β)θ, β = 90°/α) the lengths
-    grow like r^{1−β} towards it, the scale of the map z^β that opens the corner to a
-    right angle, not the rim's lengths extended harmonically (which make the map's
-    targets far from integrable there)."""
-    from ufl_frames.param.seamless import gradients
-
-    index = -np.ones(x.shape[0], dtype=np.int64)
-    index[verts] = np.arange(verts.size)
-    local = index[cells[triangles]]  # counter-clockwise
-    area, grad = gradients(x[verts], local)  # (t,), (t, 3, 2)
-    t = values[local, 0]
-    delta = 0.5 * (values[local, 2] - values[local, 1])  # (a − b)/2
-    grad_t = np.einsum("ti,tik->tk", t, grad)
-    grad_d = np.einsum("ti,tik->tk", delta, grad)
-    mean = t.mean(axis=1)
-    e1 = np.stack([np.cos(mean), np.sin(mean)], axis=1)
-    e2 = np.stack([-e1[:, 1], e1[:, 0]], axis=1)
-    g = (np.stack([-grad_t[:, 1], grad_t[:, 0]], axis=1)
-         + np.einsum("tk,tk->t", grad_d, e1)[:, None] * e1
-         - np.einsum("tk,tk->t", grad_d, e2)[:, None] * e2)
-    rows = np.repeat(local, 3, axis=1).ravel()
-    cols = np.tile(local, (1, 3)).ravel()
-    stiffness = sp.csr_matrix((np.einsum("t,tik,tjk->tij", area, grad, grad).ravel(),
-                               (rows, cols)), shape=(verts.size, verts.size))
-    load = np.bincount(local.ravel(), weights=np.einsum("t,tk,tik->ti", area, g, grad).ravel(),
-                       minlength=verts.size)
-    outside = np.ones(cells.shape[0], dtype=bool)
-    outside[triangles] = False
-    fixed = np.zeros(verts.size, dtype=bool)  # on a triangle out of the patch
-    shared = index[cells[outside].ravel()]
-    fixed[shared[shared >= 0]] = True
-    phi = -0.5 * (values[:, 1] + values[:, 2])
-    if fixed.all() or not fixed.any():
-        return values
-    A = stiffness[~fixed][:, ~fixed].tocsc()
-    phi = phi.copy()
-    phi[~fixed] = spsolve(A, load[~fixed] - stiffness[~fixed][:, fixed] @ phi[fixed])
-    d = 0.5 * (values[:, 2] - values[:, 1])
-    out = values.copy()
-    out[:, 1], out[:, 2] = -(phi + d), -(phi - d)
-    return out
 
 
 def _corner_patch(x, cells, neighbours, v, b, reach, on_boundary):
