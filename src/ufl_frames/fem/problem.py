@@ -423,7 +423,8 @@ def size_term(q: fem.Function, target, area: float, energy_scale: float,
     vertices, the weight w H_s (w = ``target.weight``, H_s = ``energy_scale``).
 
     With a smoothing s > 0 (None: :func:`size_smoothing_option`) the term also holds
-    w H_s s Ŝ, Ŝ = S ∫h²/ρ², S = ½ ∫ |∇q|²/h² (ρ² = ``radius2``, the sphere's). Ŝ, like
+    w H_s s Ŝ, Ŝ = S ∫h²/ρ², S = ½ ∫ |∇q|²/h² (ρ² = ``radius2``, the sphere's; None:
+    Σ_v m_v |q_v|² of ``q``). Ŝ, like
     M and H/H_s, is dimensionless and free of the domain's size, of h's global factor
     and of q's: for q ≈ c h e (sizes following h, e the frames' shape) it is about
     ½ ∫ |∇e|² / mean |e|², the Dirichlet energy of the directions, which grows like
@@ -454,8 +455,11 @@ def size_term(q: fem.Function, target, area: float, energy_scale: float,
         raise ValueError(f"the size smoothing must be a finite number >= 0, got {s}")
     if s == 0:
         return term
-    if radius2 is None:
-        raise ValueError("the size smoothing needs the sphere's radius2")
+    if radius2 is None:  # ρ² = Σ_v m_v |q_v|² of q as it is
+        rows = q.x.array.reshape(-1, constraints.algebra.count)[: constraints.owned]
+        radius2 = constraints.comm.allreduce(
+            float(np.einsum("n,ni,ni->", constraints.weights[: constraints.owned], rows, rows)),
+            op=MPI.SUM)
     # 1/h² per cell, h = exp(mean log h at the cell's vertices): what the kernel computes
     D0 = fem.functionspace(mesh, ("DG", 0))
     inverse_h2 = fem.Function(D0, name="inverse_h2")
