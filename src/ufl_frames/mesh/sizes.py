@@ -29,7 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["DEFAULT_SIZE_SMOOTHING", "DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS", "TRIANGLES_PER_QUAD_EDGE",
+__all__ = ["DEFAULT_SIZE_SMOOTHING", "DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS",
+           "TRIANGLES_PER_QUAD_EDGE",
            "SizeExpressionError", "SizeTarget", "file_size_samples", "parse_size_expression",
            "quad_count_factor", "read_file_sizes", "resolving_factor"]
 

@@ -200,8 +200,8 @@ class GaussNewtonModel(ActiveSetRules):
     w H_s (Gauss–Newton, or with ``exact`` the second derivative of M, or with
     ``size_mode`` its positive semidefinite modification), and the constant matrix of its
     smoothing term C S where there is one (``-frames_size_smoothing``; the sphere's
-    curvature then reads x·∇J = 4H + 2 C S, :attr:`Evaluation.radial`). The lean model's kernels add it
-    to H's element matrix (:func:`kernels.reduced_model_form` with a
+    curvature then reads x·∇J = 4H + 2 C S, :attr:`Evaluation.radial`). The lean model's
+    kernels add it to H's element matrix (:func:`kernels.reduced_model_form` with a
     :class:`~ufl_frames.fem.kernels.SizeKernel`): one matrix, no matrix of its own and no
     product Tᵀ G_M T a step. The 5N path assembles it from its UFL form
     (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its own,
