@@ -140,6 +140,13 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         lengths, _ = ALGEBRA.q_to_frames(field.q.x.array.reshape(-1, ALGEBRA.count)[:owned])
         near = int(np.count_nonzero(lengths.max(1) / lengths.min(1) > 0.9 * field.max_aspect))
         near_bound = comm.allreduce(near, op=MPI.SUM) / comm.allreduce(owned, op=MPI.SUM)
+    parts = None  # J's parts with a size target: H, M, S (J = H + w H_s M + C S)
+    problem = field.problem
+    if problem is not None and problem.size is not None:
+        term = problem.size
+        parts = {"H": problem.integrability_energy(), "M": problem.size_misfit(),
+                 "wHs": term.weight, "S": problem.size_smoothing(),
+                 "C": term.smoothing_weight, "s": term.relative_smoothing}
     peak_kb = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, op=MPI.MAX)
     krylov = result.krylov_iterations or []
     newton = [k for k in krylov if k > 0]  # steps that solved a Newton system
@@ -164,7 +171,7 @@ def run_one(case: str, h: float, max_it: int, out: Path, petsc_argv: list[str],
         "shift_factorisations": safeguard[3],
         "H_final": result.H_final, "peak_rss_mb": peak_kb / 1024,
         "singularities": sorted(s["index"] for s in field.singularities),
-        "quads": quad_record, "levels": field.levels,
+        "quads": quad_record, "levels": field.levels, "parts": parts,
     }
 
 
@@ -224,7 +231,7 @@ def print_levels_table(records) -> None:
     from _common import table_rule
 
     head = ("\n| case | ranks | levels: triangles / Newton steps / singularities "
-            "| near bound | solve CPU s (rank 0) |")
+            "| near bound | solve CPU s (rank 0) | J = H + w H_s M + C S: H, w H_s M, C S |")
     print(head)
     print(table_rule(head))
     for r in records:
@@ -233,8 +240,11 @@ def print_levels_table(records) -> None:
         levels = "; ".join(f"{e['triangles']} / {e['iterations']} / {len(e['singularities'])}"
                            for e in r["levels"])
         near = "-" if r.get("near_bound") is None else f"{100 * r['near_bound']:.1f} %"
+        p = r.get("parts")
+        parts = "-" if not p else (f"{p['H']:.4e}, {p['wHs'] * p['M']:.4e}, "
+                                   f"{p['C'] * p['S']:.4e} (s = {p['s']:g})")
         print(f"| {r['case']} | {r['ranks']} | {levels} | {near} "
-              f"| {r['cpu_rank0']['solve']:.1f} |")
+              f"| {r['cpu_rank0']['solve']:.1f} | {parts} |")
 
 
 def _indices(values) -> str:

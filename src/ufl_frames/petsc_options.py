@@ -37,8 +37,8 @@ _TYPE_SUFFIX = re.compile(r"(?:^|.*_)(ksp|pc|ls)_type")
 #: Integer options and their least value.
 _INTS = {"tao_max_it": 1, "frames_active_rounds": 0, "frames_hessian_inertia_shifts": 0}
 _NON_NEGATIVE_REALS = ("frames_gn_damping", "frames_gn_damping_min", "frames_hessian_switch",
-                       "frames_h_rtol", "frames_nested_rtol", "tao_gatol", "tao_grtol",
-                       "tao_gttol")
+                       "frames_h_rtol", "frames_nested_rtol", "frames_size_smoothing",
+                       "tao_gatol", "tao_grtol", "tao_gttol")
 _REALS = ("tao_fmin",)
 #: Switches (``-name`` alone means true) and the values PETSc reads as one.
 _BOOLS = ("frames_gn_adapt", "frames_gn_adapt_bound", "frames_active_consistent",
@@ -70,7 +70,8 @@ def petsc_option_problem(options) -> str | None:
     ``-*ls_type`` types PETSc has; ``-tao_max_it`` a positive integer;
     ``-frames_active_rounds`` and ``-frames_hessian_inertia_shifts`` integers >= 0;
     ``-frames_hessian`` one of :data:`HESSIANS`; ``-frames_size_hessian`` one of
-    :data:`SIZE_HESSIANS`; dampings and tolerances finite numbers >= 0; switches
+    :data:`SIZE_HESSIANS`; dampings, tolerances and ``-frames_size_smoothing`` (the sized
+    energy's smoothing weight, ``fem.problem.size_term``) finite numbers >= 0; switches
     (``-frames_gn_adapt``, ``-frames_active_consistent``, ...) true or false.
     """
     values = dict(options.items() if isinstance(options, dict) else options)

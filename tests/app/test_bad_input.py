@@ -133,6 +133,8 @@ def shared_tmp(tmp_path):
         (["-frames_active_rounds", "-1"], ["-frames_active_rounds"]),
         (["-frames_active_rounds", "1.5"], ["-frames_active_rounds"]),
         (["-frames_hessian_inertia_shifts", "-1"], ["-frames_hessian_inertia_shifts"]),
+        (["-frames_size_smoothing", "-0.1"], ["-frames_size_smoothing", ">= 0"]),
+        (["-frames_size_smoothing", "inf"], ["-frames_size_smoothing"]),
         (["-frames_active_consistent", "maybe"], ["-frames_active_consistent", "true or false"]),
     ],
 )
@@ -166,6 +168,7 @@ def test_supported_tao_types_pass_validation():
                         ("tao_ls_type", "armijo"), ("frames_hessian", "exact"),
                         ("frames_gn_damping", "0"), ("tao_max_it", "7"), ("frames_h_rtol", "0"),
                         ("frames_nested_rtol", "0"), ("frames_active_rounds", "0"),
+                        ("frames_size_smoothing", "0.01"),
                         ("tao_bncg_type", "gd"), ("tao_monitor", None)]:
         assert petsc_options.petsc_option_problem([(name, value)]) is None, name
     # The last value of an option counts, as in PETSc.

@@ -207,10 +207,11 @@ def test_kernels_of_another_algebra_equal_its_ufl_forms(exact):
 # --- the size misfit's matrix (kernels.size_model_form and the sized kernels) -----------
 
 
-def _sized_problem(mesh_size=0.15):
+def _sized_problem(mesh_size=0.15, smoothing=0.0):
     """A sized problem on a coarse annulus: a non-isotropic field whose lengths, ratio and
     angle vary (q1, q2 ≠ 0: β and every term of σ's derivatives count) and a graded
-    target (the residual ∇(σ − log h) is not small), with the kernels' size term."""
+    target (the residual ∇(σ − log h) is not small), with the kernels' size term (and its
+    smoothing term of relative weight ``smoothing``)."""
     from ufl_frames.fem.problem import frame_problem
     from ufl_frames.mesh.sizes import SizeTarget
 
@@ -224,19 +225,24 @@ def _sized_problem(mesh_size=0.15):
 
     q = energy.interpolate_frames(V, f)
     problem = frame_problem(q, pin_singularities=False,
-                            size=SizeTarget.expression("0.6 + x*x + 0.5*y"))
+                            size=SizeTarget.expression("0.6 + x*x + 0.5*y"),
+                            size_smoothing=smoothing)
     size = problem.size
     mode = fem.Constant(V.mesh, PETSc.ScalarType(kernels.SIZE_GAUSS_NEWTON))
-    return q, size, kernels.SizeKernel(size.log_h, size.coefficient, size.inverse_area, mode)
+    return q, size, kernels.SizeKernel(size.log_h, size.coefficient, size.inverse_area, mode,
+                                       size.smoothing)
 
 
+@pytest.mark.parametrize("smoothing", [0.0, 0.7], ids=["misfit", "smoothed"])
 @pytest.mark.parametrize("exact", [False, True], ids=["gauss_newton", "hessian"])
-def test_compiled_size_matrix_equals_the_ufl_form(exact):
+def test_compiled_size_matrix_equals_the_ufl_form(exact, smoothing):
     """w H_s times the size misfit's Gauss–Newton form and its second derivative (UFL:
     ``energy.size_gauss_newton_form``, the derivative of ``energy.size_misfit_form``
     twice) to round-off, serial and in parallel; the mode is a Constant, read at every
-    assembly."""
-    q, size, kernel = _sized_problem()
+    assembly. With a smoothing term, its matrix C ∫ ∇δq:∇w/h² (the kernel's h from
+    log h at the vertices, UFL's a DG0 function) is added in both."""
+    q, size, kernel = _sized_problem(smoothing=smoothing)
+    assert (size.smoothing is not None) == (smoothing > 0)
     reference = assembled(fem.form(size.hessian_ufl(q, exact)))
     compiled = kernels.size_model_form(q, kernel)
     kernel.mode.value = kernels.SIZE_EXACT if exact else kernels.SIZE_GAUSS_NEWTON

@@ -110,9 +110,11 @@ def test_quads_follow_the_file_s_own_sizes(shared_tmp):
 def test_log_polar_size_on_the_annulus(shared_tmp):
     """--size "hypot(x, y)" on the annulus: a target the integrable log-polar frames meet
     exactly, so the field's sizes follow it to within 1 % and the quads' edges to within
-    a few per cent (their ratio to h, up to the global factor, in [0.95, 1.05])."""
+    a few per cent (their ratio to h, up to the global factor, in [0.95, 1.05]). Without
+    the smoothing term (``-frames_size_smoothing 0``), whose minimum the log-polar field is
+    not (the default's p90 of the field's |log(l/ch)| is 0.021 here, measured)."""
     summary = solve(shared_tmp / "out", "annulus", "--size", "hypot(x, y)", "--quads",
-                    "--quad-count", 300)
+                    "--quad-count", 300, "-frames_size_smoothing", "0")
     sizes = summary["sizes"]
     assert sizes["h_ratio"] == pytest.approx(2.0, rel=1e-3)
     assert sizes["field"]["p90_abs_log"] < 0.01

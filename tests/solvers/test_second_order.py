@@ -459,3 +459,44 @@ def test_exact_hessian_is_the_riemannian_hessian_at_a_critical_point():
         assert abs(gn - fd) > 100 * abs(dbd - fd)
     exact.free()
     gauss_newton_only.free()
+
+
+@pytest.mark.parametrize("smoothing", [0.0, 0.05], ids=["sized", "smoothed"])
+def test_exact_hessian_of_the_sized_energy_is_the_riemannian_hessian(smoothing):
+    """The same with a size target and its smoothing term C S (``-frames_size_smoothing``):
+    the exact model adds w H_s ∇²M and the constant C ∫ ∇δq:∇w/h², and the sphere's
+    curvature reads x·∇J = 4H + 2 C S (S is quadratic, M of degree 0). Isotropic frames
+    (no aspect bound to cross), a graded target, at a critical point of J."""
+    from ufl_frames.mesh.sizes import SizeTarget
+
+    comm = MPI.COMM_WORLD
+    mesh = piano(comm, mesh_size=0.2).mesh
+    q = mbo.mbo_frame_field(energy.frame_space(mesh))
+    problem = solvers.frame_problem(q, isotropic=True, pin_singularities=True,
+                                    size=SizeTarget.expression("0.5 + 0.3 * x"),
+                                    size_smoothing=smoothing)
+    assert (problem.size.smoothing is not None) == (smoothing > 0)
+    with petsc_defaults("crits_", {"tao_gttol": 1e-11, "tao_nls_ksp_rtol": 1e-12,
+                                   "frames_h_rtol": 0.0}):
+        result = solvers.solve(problem, max_it=100, options_prefix="crits_")
+    assert result.converged_reason.startswith("CONVERGED")
+    x = scaled_x(problem)
+    gradient_at(problem, x)
+    evaluation = problem.evaluation()
+    # the Euler identity that recovers H from the gradient, with the quadratic term
+    assert evaluation.integrability == pytest.approx(problem.integrability_energy(), rel=1e-10)
+    assert evaluation.smoothing == pytest.approx(
+        problem.size.smoothing_weight * problem.size_smoothing(), rel=1e-12)
+    exact = solvers.GaussNewtonModel(problem, x, damping=0.0, damping_min=0.0, exact=True)
+    for phase in (0.0, 1.3):
+        d = smooth_tangent(problem, x, phase)
+        fd = second_difference(lambda e, d=d: f_along(problem, x, d, e), 1e-3)
+        dbd = d.dot(apply(exact, d))
+        if comm.rank == 0:
+            print(f"\nphase {phase}: second difference {fd:.8e}, exact model {dbd:.8e}, "
+                  f"sphere's share of the smoothing {2 * evaluation.smoothing / problem.norm2:.3e}")
+        assert dbd == pytest.approx(fd, rel=1e-5)
+        if smoothing:  # without the smoothing's part of the sphere's curvature: off
+            without = dbd + 2 * evaluation.smoothing / problem.norm2 * d.dot(d)
+            assert abs(without - fd) > 10 * abs(dbd - fd)
+    exact.free()

@@ -205,6 +205,26 @@ def size_gauss_newton_form(q, log_h, inverse_area) -> ufl.Form:
             ) * ufl.dx(metadata=metadata)
 
 
+def size_smoothing_form(q, inverse_h2) -> ufl.Form:
+    r"""S(q) = ½ ∫ |∇q|² / h² dx: the Dirichlet energy of q in the metric of the size target,
+    as a UFL form (``inverse_h2`` = 1/h², a cell-wise constant: DG0).
+
+    The sized energy's smoothing term (:func:`ufl_frames.fem.problem.size_term`): a
+    singularity of q costs it ∝ log(R/r₀), r₀ the core (the mesh size), as in
+    Ginzburg–Landau, where H and the misfit M (:func:`size_misfit_form`) are finite for
+    a field with a ± pair. Dividing by h² makes it scale-free once multiplied by ∫ h²/ρ²
+    (see ``size_term``). Quadratic in q: its second derivative is constant."""
+    return 0.5 * inverse_h2 * ufl.inner(ufl.grad(q), ufl.grad(q)) * ufl.dx
+
+
+def size_smoothing_hessian_form(q, inverse_h2) -> ufl.Form:
+    """The (constant) second derivative of :func:`size_smoothing_form`:
+    ∫ ∇δq:∇w / h² dx, w the test and δq the trial function."""
+    V = q.function_space
+    w, dq = ufl.TestFunction(V), ufl.TrialFunction(V)
+    return inverse_h2 * ufl.inner(ufl.grad(dq), ufl.grad(w)) * ufl.dx
+
+
 def size_hessian_form(q, log_h, inverse_area) -> ufl.Form:
     """The second derivative of M (:func:`size_misfit_form`) as a bilinear form."""
     V = q.function_space

@@ -72,12 +72,22 @@ class SizeKernel:
     """What the kernels need of the size target's term w H_s M (2D frames,
     :class:`ufl_frames.fem.problem.SizeTerm`): log h (a scalar P1 function), the factor
     w H_s, 1/A and the mode (:data:`SIZE_GAUSS_NEWTON`, :data:`SIZE_EXACT`,
-    :data:`SIZE_MODIFIED`), each Constant read at every assembly."""
+    :data:`SIZE_MODIFIED`), and the factor C of the smoothing term C S
+    (:func:`ufl_frames.fem.energy.size_smoothing_form`; 0: none), each Constant read at
+    every assembly."""
 
     log_h: fem.Function
     coefficient: fem.Constant
     inverse_area: fem.Constant
     mode: fem.Constant
+    smoothing: fem.Constant | None = None
+
+    def constants(self) -> list:
+        """w H_s, 1/A, the mode and C (a zero Constant where ``smoothing`` is None)."""
+        smoothing = self.smoothing
+        if smoothing is None:
+            smoothing = fem.Constant(self.log_h.function_space.mesh, PETSc.ScalarType(0.0))
+        return [self.coefficient, self.inverse_area, self.mode, smoothing]
 
 
 @dataclass(frozen=True)
@@ -359,7 +369,7 @@ def _reduced_hessian_and_action_lines(z: _Sizes, size: bool) -> list[str]:
     def sized_line(logh: str) -> list[str]:
         if not size:
             return []
-        return [f"  if (sized) size_model(A, w, {logh}, c[2], c[3], (int)c[4], x);"]
+        return [f"  if (sized) size_model(A, w, {logh}, c[2], c[3], (int)c[4], c[5], x);"]
 
     return [
         "static inline void project(double* restrict R, const double* restrict A,",
@@ -486,13 +496,27 @@ def _size_lines(z: _Sizes) -> list[str]:
         "/* weight × the element matrix of M = ½ ∫ |∇(σ(q) − log h)|² + ½ (1/A) ∫ |β(q)|², added",
         "   to A: σ = ½ log P, P = l1 l2 = s²/4 − q1² − q2², s = c0 q0; β = (2/c0)(q1, q2)/q0.",
         "   mode 0: Gauss–Newton; 1: the second derivative; 2: its positive semidefinite",
-        "   modification (the residual's curvature clipped per quadrature point). */",
+        "   modification (the residual's curvature clipped per quadrature point).",
+        "   And smoothing × the element matrix of S = ½ ∫ |∇q|²/h², h = exp(mean log h). */",
         "static inline void size_model(double* restrict A, const double* restrict w,",
         "                              const double* restrict logh, const double weight,",
         "                              const double inverse_area, const int mode,",
-        "                              const double* restrict x)",
+        "                              const double smoothing, const double* restrict x)",
         "{",
         *z.cell.gradients,
+        "  if (smoothing != 0.0)",
+        "  {",
+        "    const double ws = smoothing * area * exp(-2.0 * ("
+        + " + ".join(f"logh[{v}]" for v in range(nv)) + f") / {nv}.0);",
+        f"    for (int v = 0; v < {nv}; ++v)",
+        f"      for (int u = 0; u < {nv}; ++u)",
+        "      {",
+        "        const double k = ws * (" + " + ".join(
+            f"dphi[v][{d}] * dphi[u][{d}]" for d in range(z.d)) + ");",
+        f"        for (int m = 0; m < {n}; ++m)",
+        f"          A[{nd} * ({n} * v + m) + {n} * u + m] += k;",
+        "      }",
+        "  }",
         "  double gq[3][2], gl[2];",
         "  for (int k = 0; k < 2; ++k)",
         "  {",
@@ -677,7 +701,7 @@ def _sized_kernel_lines(z: _Sizes, algebra) -> list[str]:
     return [
         f"void {_SIZE_NAME}{_ARGUMENTS}",
         "{",
-        f"  size_model(A, w, w + {nd}, c[0], c[1], (int)c[2], coordinate_dofs);",
+        f"  size_model(A, w, w + {nd}, c[0], c[1], (int)c[2], c[3], coordinate_dofs);",
         "}",
         "static inline void project(double* restrict R, const double* restrict A,",
         "                           const double* restrict w, const int nc);",
@@ -686,7 +710,7 @@ def _sized_kernel_lines(z: _Sizes, algebra) -> list[str]:
         "                                const double* restrict x, const int nc)",
         "{",
         f"  double A[{nd * nd}] = {{0}};",
-        f"  size_model(A, w, w + {nd} + {nd} * nc, c[2], c[3], (int)c[4], x);",
+        f"  size_model(A, w, w + {nd} + {nd} * nc, c[2], c[3], (int)c[4], c[5], x);",
         "  project(R, A, w, nc);",
         "}",
     ]
@@ -908,19 +932,19 @@ def size_model_form(q: fem.Function, size: SizeKernel) -> fem.Form:
     check_frame_function(q, algebra=ALGEBRA)
     V = q.function_space
     return _compiled_form(_SIZE_NAME, [V, V], [q, size.log_h],
-                          [size.coefficient, size.inverse_area, size.mode], ALGEBRA)
+                          size.constants(), ALGEBRA)
 
 
 def _with_size(coefficients: list, constants: list, size: SizeKernel | None, algebra):
     """The kernels' coefficients and constants with the size term's appended (log h; w H_s,
-    1/A, mode)."""
+    1/A, mode, the smoothing's C)."""
     if size is None:
         return coefficients, constants
     if not _has_size(algebra):
         raise ValueError("the size misfit's kernels are written for 2D frames only")
     _check_same_vertices(coefficients[0].function_space, size.log_h.function_space)
     return ([*coefficients, size.log_h],
-            [*constants, size.coefficient, size.inverse_area, size.mode])
+            [*constants, *size.constants()])
 
 
 def _check_same_vertices(V: fem.FunctionSpace, W: fem.FunctionSpace) -> None:

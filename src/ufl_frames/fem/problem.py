@@ -29,6 +29,7 @@ init_petsc()
 import dolfinx  # noqa: E402
 import dolfinx.fem as fem  # noqa: E402
 import numpy as np  # noqa: E402
+import ufl  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
@@ -39,7 +40,8 @@ from ufl_frames.fem.manifold import FrameManifold  # noqa: E402
 from ufl_frames.frames2d.algebra import ALGEBRA  # noqa: E402
 from ufl_frames.frames2d.aspect import DEFAULT_MAX_ASPECT  # noqa: E402
 
-__all__ = ["Evaluation", "FrameProblem", "SizeTerm", "frame_problem"]
+__all__ = ["Evaluation", "FrameProblem", "SizeTerm", "frame_problem", "size_smoothing_option",
+           "size_term"]
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,15 @@ class Evaluation:
     energy: float
     gradient_x: np.ndarray = field(repr=False)
     integrability: float | None = None
+    #: The size term's smoothing part C S(q) (quadratic: x·∇(C S) = 2 C S), 0 without it.
+    smoothing: float = 0.0
+
+    @property
+    def radial(self) -> float:
+        """(x·∇J)/4: the energy whose Euler identity the sphere's curvature reads
+        (H, plus half the quadratic smoothing term)."""
+        H = self.energy if self.integrability is None else self.integrability
+        return H + 0.5 * self.smoothing
 
 
 @dataclass
@@ -59,7 +70,11 @@ class SizeTerm:
     """The size target's term w H_s M(q) of the sized energy: log h at the vertices, the
     weight's Constant (w H_s), the UFL misfit and its compiled form.
 
-    ``target`` is the :class:`~ufl_frames.mesh.sizes.SizeTarget` it was made from."""
+    ``target`` is the :class:`~ufl_frames.mesh.sizes.SizeTarget` it was made from. With a
+    smoothing s > 0 (``-frames_size_smoothing``) the term is w H_s (M + s Ŝ), Ŝ = S ∫h²/ρ²
+    and S = ½ ∫ |∇q|²/h² (:func:`~ufl_frames.fem.energy.size_smoothing_form`): the
+    ``smoothing`` Constant is C = w H_s s ∫h²/ρ², the factor of S; ``inverse_h2`` 1/h² a
+    cell (DG0, h = exp of the mean of log h at its vertices)."""
 
     target: object
     log_h: fem.Function
@@ -67,6 +82,26 @@ class SizeTerm:
     coefficient: fem.Constant
     misfit_ufl: object = field(repr=False)
     misfit: fem.Form = field(repr=False)
+    #: s, dimensionless (0: no smoothing term).
+    relative_smoothing: float = 0.0
+    smoothing: fem.Constant | None = field(default=None, repr=False)
+    inverse_h2: fem.Function | None = field(default=None, repr=False)
+    smoothing_ufl: object = field(default=None, repr=False)
+    #: S(q) compiled (None without smoothing).
+    smoothing_energy: fem.Form | None = field(default=None, repr=False)
+
+    @property
+    def smoothing_weight(self) -> float:
+        """C = w H_s s ∫h²/ρ², the factor of S in the objective (0 without smoothing)."""
+        return 0.0 if self.smoothing is None else float(self.smoothing.value)
+
+    @property
+    def objective_ufl(self):
+        """The term's UFL form: w H_s M + C S."""
+        form = self.coefficient * self.misfit_ufl
+        if self.smoothing_ufl is not None:
+            form = form + self.smoothing * self.smoothing_ufl
+        return form
 
     @property
     def weight(self) -> float:
@@ -76,7 +111,11 @@ class SizeTerm:
     def hessian_ufl(self, q, exact: bool):
         """The weighted second derivative (``exact``) or Gauss–Newton form of the term."""
         make = energy.size_hessian_form if exact else energy.size_gauss_newton_form
-        return self.coefficient * make(q, self.log_h, self.inverse_area)
+        form = self.coefficient * make(q, self.log_h, self.inverse_area)
+        if self.smoothing_ufl is not None:  # quadratic: the same in both
+            form = form + self.smoothing * energy.size_smoothing_hessian_form(
+                q, self.inverse_h2)
+        return form
 
 
 @dataclass
@@ -220,6 +259,9 @@ class FrameProblem:
         local = fem.assemble_scalar(self.integrability)
         if self.size is not None:
             local += self.size.weight * fem.assemble_scalar(self.size.misfit)
+            if self.size.smoothing_energy is not None:
+                local += self.size.smoothing_weight * fem.assemble_scalar(
+                    self.size.smoothing_energy)
         return self.q.function_space.mesh.comm.allreduce(local, op=MPI.SUM)
 
     def integrability_energy(self) -> float:
@@ -235,6 +277,13 @@ class FrameProblem:
         return self.q.function_space.mesh.comm.allreduce(
             fem.assemble_scalar(self.size.misfit), op=MPI.SUM)
 
+    def size_smoothing(self) -> float:
+        """S(q) = ½ ∫ |∇q|²/h² (without its factor C); 0 without a smoothing term."""
+        if self.size is None or self.size.smoothing_energy is None:
+            return 0.0
+        return self.q.function_space.mesh.comm.allreduce(
+            fem.assemble_scalar(self.size.smoothing_energy), op=MPI.SUM)
+
     def dirichlet_energy(self) -> float:
         """E(q) = ½∫|∇q|², assembled."""
         return self.q.function_space.mesh.comm.allreduce(
@@ -247,7 +296,8 @@ class FrameProblem:
         H comes free with the gradient: the discrete H is a homogeneous quartic in the
         coefficients of q, so dH(q)[q] = 4 H(q) (Euler) — no second assembly. The size
         misfit M is homogeneous of degree 0 (dM(q)[q] = 0), so that stays true of the
-        sized gradient; M itself is one more scalar assembly.
+        sized gradient; M itself is one more scalar assembly. The smoothing term C S is
+        quadratic (dS(q)[q] = 2 S): one more scalar assembly, taken off before dividing.
         """
         if self._tracking and self._evaluated is not None \
                 and self._evaluated[0] == self._version:
@@ -255,14 +305,19 @@ class FrameProblem:
         b = fem.assemble_vector(self.gradient)
         b.scatter_reverse(dolfinx.la.InsertMode.add)
         owned = self.algebra.count * self.owned
-        H = self.constraints.comm.allreduce(
-            float(np.dot(b.array[:owned], self.q.x.array[:owned])), op=MPI.SUM) / 4
+        smoothing = 0.0
+        if self.size is not None and self.size.smoothing_energy is not None:
+            smoothing = self.size.smoothing_weight * self.size_smoothing()
+        H = (self.constraints.comm.allreduce(
+            float(np.dot(b.array[:owned], self.q.x.array[:owned])), op=MPI.SUM)
+            - 2.0 * smoothing) / 4
         # Ghost rows of b are partial sums: used pointwise (active sets), never summed.
         gradient_x = b.array.reshape(-1, self.algebra.count) / self.sqrt_mass[:, None]
         objective = H
         if self.size is not None:
-            objective = H + self.size.weight * self.size_misfit()
-        result = Evaluation(energy=objective, gradient_x=gradient_x, integrability=H)
+            objective = H + self.size.weight * self.size_misfit() + smoothing
+        result = Evaluation(energy=objective, gradient_x=gradient_x, integrability=H,
+                            smoothing=smoothing)
         if self._tracking:
             self._evaluated = (self._version, result)
         return result
@@ -285,6 +340,7 @@ def frame_problem(
     pin_radius: float = 0.0,
     algebra=ALGEBRA,
     size=None,
+    size_smoothing: float | None = None,
 ) -> FrameProblem:
     """Compile the energies of ``q``, find its constraints and retract it onto 𝓜.
 
@@ -311,6 +367,9 @@ def frame_problem(
         size: A :class:`~ufl_frames.mesh.sizes.SizeTarget`: the objective is then the
             sized energy J = H + w H_s M (w its ``weight``); None: H. Needs a finite
             aspect bound (log(l1 l2) of the frames).
+        size_smoothing: s of the size term's smoothing (:func:`size_term`); None: the
+            option ``-frames_size_smoothing`` (default
+            :data:`~ufl_frames.mesh.sizes.DEFAULT_SIZE_SMOOTHING`).
 
     Returns:
         The problem, ``q`` on 𝓜.
@@ -333,8 +392,9 @@ def frame_problem(
                                       op=MPI.SUM)
     term, objective = None, H
     if size is not None:
-        term = size_term(q, size, area, (manifold.radius2 / area) ** 2, constraints)
-        objective = H + term.coefficient * term.misfit_ufl
+        term = size_term(q, size, area, (manifold.radius2 / area) ** 2, constraints,
+                         smoothing=size_smoothing, radius2=manifold.radius2)
+        objective = H + term.objective_ufl
     problem = FrameProblem(
         q=q,
         manifold=manifold,
@@ -348,14 +408,33 @@ def frame_problem(
     return problem
 
 
+def size_smoothing_option() -> float:
+    """s of ``-frames_size_smoothing`` (:data:`~ufl_frames.mesh.sizes.DEFAULT_SIZE_SMOOTHING`
+    where it is not given)."""
+    from ufl_frames.mesh.sizes import DEFAULT_SIZE_SMOOTHING
+
+    return PETSc.Options().getReal("frames_size_smoothing", DEFAULT_SIZE_SMOOTHING)
+
+
 def size_term(q: fem.Function, target, area: float, energy_scale: float,
-              constraints: FrameConstraints) -> SizeTerm:
+              constraints: FrameConstraints, smoothing: float | None = None,
+              radius2: float | None = None) -> SizeTerm:
     """The :class:`SizeTerm` of a size target on ``q``'s mesh: log h interpolated at the
     vertices, the weight w H_s (w = ``target.weight``, H_s = ``energy_scale``).
 
+    With a smoothing s > 0 (None: :func:`size_smoothing_option`) the term also holds
+    w H_s s Ŝ, Ŝ = S ∫h²/ρ², S = ½ ∫ |∇q|²/h² (ρ² = ``radius2``, the sphere's; None:
+    Σ_v m_v |q_v|² of ``q``). Ŝ, like
+    M and H/H_s, is dimensionless and free of the domain's size, of h's global factor
+    and of q's: for q ≈ c h e (sizes following h, e the frames' shape) it is about
+    ½ ∫ |∇e|² / mean |e|², the Dirichlet energy of the directions, which grows like
+    π log(R/r₀) a singularity (r₀ the mesh size) where H and M stay finite. So s is the
+    smoothing's weight relative to the misfit's; its factor C = w H_s s ∫h²/ρ² is
+    constant on the frame manifold.
+
     Raises:
-        ValueError: the frames have no finite aspect bound, or h is not finite and
-            positive at every vertex (one line).
+        ValueError: the frames have no finite aspect bound, h is not finite and
+            positive at every vertex, or s is not finite and >= 0 (one line).
     """
     bound = constraints.max_aspect
     if not constraints.isotropic and not (bound and np.isfinite(bound)):
@@ -369,5 +448,31 @@ def size_term(q: fem.Function, target, area: float, energy_scale: float,
     inverse_area = fem.Constant(mesh, PETSc.ScalarType(1.0 / area))
     coefficient = fem.Constant(mesh, PETSc.ScalarType(target.weight * energy_scale))
     misfit = energy.size_misfit_form(q, log_h, inverse_area)
-    return SizeTerm(target=target, log_h=log_h, inverse_area=inverse_area,
+    term = SizeTerm(target=target, log_h=log_h, inverse_area=inverse_area,
                     coefficient=coefficient, misfit_ufl=misfit, misfit=fem.form(misfit))
+    s = size_smoothing_option() if smoothing is None else float(smoothing)
+    if not (np.isfinite(s) and s >= 0):
+        raise ValueError(f"the size smoothing must be a finite number >= 0, got {s}")
+    if s == 0:
+        return term
+    if radius2 is None:  # ρ² = Σ_v m_v |q_v|² of q as it is
+        rows = q.x.array.reshape(-1, constraints.algebra.count)[: constraints.owned]
+        radius2 = constraints.comm.allreduce(
+            float(np.einsum("n,ni,ni->", constraints.weights[: constraints.owned], rows, rows)),
+            op=MPI.SUM)
+    # 1/h² per cell, h = exp(mean log h at the cell's vertices): what the kernel computes
+    D0 = fem.functionspace(mesh, ("DG", 0))
+    inverse_h2 = fem.Function(D0, name="inverse_h2")
+    cells = mesh.topology.index_map(mesh.topology.dim)
+    count = cells.size_local + cells.num_ghosts
+    mean_log = log_h.x.array[S.dofmap.list[:count]].mean(axis=1)
+    inverse_h2.x.array[D0.dofmap.list[:count, 0]] = np.exp(-2.0 * mean_log)
+    h2_integral = energy.assemble_energy(fem.form(1.0 / inverse_h2 * ufl.dx))
+    factor = target.weight * energy_scale * s * h2_integral / radius2
+    smoothing_ufl = energy.size_smoothing_form(q, inverse_h2)
+    term.relative_smoothing = s
+    term.smoothing = fem.Constant(mesh, PETSc.ScalarType(factor))
+    term.inverse_h2 = inverse_h2
+    term.smoothing_ufl = smoothing_ufl
+    term.smoothing_energy = fem.form(smoothing_ufl)
+    return term

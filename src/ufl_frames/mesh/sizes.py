@@ -29,13 +29,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS", "TRIANGLES_PER_QUAD_EDGE",
+__all__ = ["DEFAULT_SIZE_SMOOTHING", "DEFAULT_SIZE_WEIGHT", "FUNCTIONS", "SIZE_WORDS",
+           "TRIANGLES_PER_QUAD_EDGE",
            "SizeExpressionError", "SizeTarget", "file_size_samples", "parse_size_expression",
            "quad_count_factor", "read_file_sizes", "resolving_factor"]
 
 #: w of the sized energy H + w H_s M (see :func:`ufl_frames.fem.energy.size_misfit_form`):
 #: dimensionless, measured in ``docs/note-checks.md`` ("The sized problem").
 DEFAULT_SIZE_WEIGHT = 0.3
+#: s of the sized energy's smoothing term w H_s s Ŝ (``-frames_size_smoothing``; see
+#: :func:`ufl_frames.fem.problem.size_term`): a Dirichlet energy relative to the misfit,
+#: which charges each singularity ∝ log(1/mesh size). 0: no such term. Without it the
+#: sized piano's minimisers grow ±1/4 pairs under refinement (38 singularities at 24 687
+#: triangles unpinned); with 0.1 they keep 2 (0.05: 4); benchmarks/README, "A smoothing
+#: term for the sized problem".
+DEFAULT_SIZE_SMOOTHING = 0.1
 
 #: Triangle edges a quad edge of a sized mesh spans at least (see :func:`resolving_factor`).
 #: Measured on ``benchmarks/shapes/l_shape_graded.geo`` at 400 quads: about one (the

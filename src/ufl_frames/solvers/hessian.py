@@ -198,8 +198,10 @@ class GaussNewtonModel(ActiveSetRules):
 
     With a size target (``problem.size``) G also holds the size term's matrix
     w H_s (Gauss–Newton, or with ``exact`` the second derivative of M, or with
-    ``size_mode`` its positive semidefinite modification). The lean model's kernels add it
-    to H's element matrix (:func:`kernels.reduced_model_form` with a
+    ``size_mode`` its positive semidefinite modification), and the constant matrix of its
+    smoothing term C S where there is one (``-frames_size_smoothing``; the sphere's
+    curvature then reads x·∇J = 4H + 2 C S, :attr:`Evaluation.radial`). The lean model's
+    kernels add it to H's element matrix (:func:`kernels.reduced_model_form` with a
     :class:`~ufl_frames.fem.kernels.SizeKernel`): one matrix, no matrix of its own and no
     product Tᵀ G_M T a step. The 5N path assembles it from its UFL form
     (:meth:`~ufl_frames.fem.problem.SizeTerm.hessian_ufl`) into a matrix of its own,
@@ -352,7 +354,8 @@ class GaussNewtonModel(ActiveSetRules):
         if self.lean and size is not None and problem.algebra.dim == 2:
             self.size_kernel = kernels.SizeKernel(
                 size.log_h, size.coefficient, size.inverse_area,
-                fem.Constant(mesh, PETSc.ScalarType(kernels.SIZE_GAUSS_NEWTON)))
+                fem.Constant(mesh, PETSc.ScalarType(kernels.SIZE_GAUSS_NEWTON)),
+                size.smoothing)
         self.form = self._model_form(self.exact)
         self.size_form = self._size_form(self.exact)
         if self.size_form is not None:
@@ -424,11 +427,10 @@ class GaussNewtonModel(ActiveSetRules):
         if self.exact:
             self._curvature_blocks = manifold.curvature_blocks(problem.rows, basis,
                                                                evaluation.gradient_x)
-            # Curvature of the sphere |x| = ρ: −(x·∇H)/ρ² on its tangent space, x·∇H = 4H
-            # (x·∇M = 0: the size misfit is homogeneous of degree 0).
-            H = evaluation.energy if evaluation.integrability is None \
-                else evaluation.integrability
-            self.sphere = manifold.sphere_curvature(H)
+            # Curvature of the sphere |x| = ρ: −(x·∇J)/ρ² on its tangent space, x·∇H = 4H
+            # (x·∇M = 0: the size misfit is homogeneous of degree 0; the smoothing term
+            # C S is quadratic, x·∇(C S) = 2 C S: Evaluation.radial).
+            self.sphere = manifold.sphere_curvature(evaluation.radial)
         if self.lean:  # only the reduced matrix: no 5N × 5N pre-matrix, no copy of it
             self.mu = None  # from trace(Tᵀ G T), as the 5N path's trace(P G P) / trace(P)
             self._build_reduced()
