@@ -256,6 +256,15 @@ def _patch(x, cells, neighbours, a, b, d, on_boundary):
     return free, triangles
 
 
+def _is_disk(cells, triangles) -> bool:
+    """Whether the triangles form a disk (Euler characteristic 1, one boundary loop)."""
+    used = np.unique(cells[triangles].ravel())
+    local_edges, local_faces = cutting.interior_edges(cells[triangles])
+    euler = used.size - local_edges.shape[0] + triangles.size
+    loops = cutting._boundary_loops(local_edges, local_faces, int(cells.max()) + 1)
+    return euler == 1 and len(loops) == 1
+
+
 def _unusable(patch, cells, edges, faces, blocked, singular, pair):
     """Why the patch cannot take a smooth field (None where it can)."""
     free, triangles = patch
@@ -266,13 +275,7 @@ def _unusable(patch, cells, edges, faces, blocked, singular, pair):
     others = set(np.intersect1d(singular, cells[triangles].ravel()).tolist()) - pair
     if others:
         return "another singularity in the patch"
-    used = np.unique(cells[triangles].ravel())
-    local_edges, local_faces = cutting.interior_edges(cells[triangles])
-    euler = used.size - local_edges.shape[0] + triangles.size
-    loops = cutting._boundary_loops(local_edges, local_faces, int(cells.max()) + 1)
-    if euler != 1 or len(loops) != 1:
-        return "the patch is not a disk"
-    return None
+    return None if _is_disk(cells, triangles) else "the patch is not a disk"
 
 
 def _boundary_cycle(cells, triangles):
@@ -517,10 +520,4 @@ def _corner_unusable(patch, cells, blocked, singular, v, b):
         return "a model point or an interior model curve near the corner"
     if set(np.intersect1d(singular, cells[triangles].ravel()).tolist()) - {b}:
         return "another singularity in the patch"
-    used = np.unique(cells[triangles].ravel())
-    local_edges, local_faces = cutting.interior_edges(cells[triangles])
-    euler = used.size - local_edges.shape[0] + triangles.size
-    loops = cutting._boundary_loops(local_edges, local_faces, int(cells.max()) + 1)
-    if euler != 1 or len(loops) != 1:
-        return "the patch is not a disk"
-    return None
+    return None if _is_disk(cells, triangles) else "the patch is not a disk"
