@@ -245,14 +245,18 @@ def test_log_polar_target_is_recovered_under_refinement(log_polar_solves):
     assert log_polar_solves[-1][4] < 0.01  # lengths within 1 % of c r (median)
 
 
-def test_log_polar_sizes_are_kept_with_the_default_smoothing():
-    """With the default smoothing term (s = 0.1) J's minimum is no longer the log-polar
+def test_log_polar_sizes_are_kept_with_the_smoothing_term():
+    """With the smoothing term (s = 0.1) J's minimum is no longer the log-polar
     field (its directions turn: Ŝ > 0, M stays about 0.01, measured), but the frames'
     lengths still follow h = r: within 1 % of c r (median; 0.2 % measured at h = 0.025,
     0.7 % at h = 0.1, the size used here) and H falls as without it."""
     field = FrameField.initial(build(COMM, "annulus", mesh_size=SIZES[0]),
                                size=SizeTarget.expression("hypot(x, y)"))
-    result = field.solve(max_it=200)
+    from ufl_frames.bootstrap import options_scope
+    from ufl_frames.mesh.sizes import SIZE_SMOOTHING
+
+    with options_scope([("frames_size_smoothing", str(SIZE_SMOOTHING))]):
+        result = field.solve(max_it=200)
     assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
     problem = field.problem
     assert problem.size.smoothing_weight > 0
@@ -319,15 +323,15 @@ def test_newton_models_with_the_size_term_agree(options):
 def test_smoothing_keeps_the_unpinned_sized_piano_from_forming_pairs():
     """The sized energy alone (no smoothing) is lowered by ±1/4 pairs: the unpinned sized
     piano at 3 925 triangles, solved from MBO's 2 singularities, ends with 8 (measured).
-    The default smoothing term (``-frames_size_smoothing``, ``DEFAULT_SIZE_SMOOTHING``)
-    charges each singularity ∝ log(1/h), and the same solve keeps MBO's 2."""
+    The smoothing term (``-frames_size_smoothing``, ``SIZE_SMOOTHING``) charges each
+    singularity ∝ log(1/h), and the same solve keeps MBO's 2."""
     from ufl_frames.bootstrap import options_scope
-    from ufl_frames.mesh.sizes import DEFAULT_SIZE_SMOOTHING
+    from ufl_frames.mesh.sizes import SIZE_SMOOTHING
 
-    assert DEFAULT_SIZE_SMOOTHING > 0
     domain = build(COMM, "piano", mesh_size=0.035)
     counts = {}
-    for options in ([("frames_size_smoothing", "0")], []):
+    for options in ([("frames_size_smoothing", "0")],
+                    [("frames_size_smoothing", str(SIZE_SMOOTHING))]):
         field = FrameField.initial(domain, size=SizeTarget.uniform())
         assert len(field.singularities) == 2
         with options_scope(options):
@@ -335,9 +339,9 @@ def test_smoothing_keeps_the_unpinned_sized_piano_from_forming_pairs():
         assert result.converged_reason.startswith("CONVERGED"), result.converged_reason
         smoothing = field.problem.size.relative_smoothing
         counts[smoothing] = sorted(s["index"] for s in field.singularities)
-    assert set(counts) == {0.0, DEFAULT_SIZE_SMOOTHING}
+    assert set(counts) == {0.0, SIZE_SMOOTHING}
     assert len(counts[0.0]) > 2, counts
-    assert counts[DEFAULT_SIZE_SMOOTHING] == [-0.25, 0.25], counts
+    assert counts[SIZE_SMOOTHING] == [-0.25, 0.25], counts
 
 
 def test_smoothing_term_is_scale_free_and_refused_when_negative(annulus_mesh):
