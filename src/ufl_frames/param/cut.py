@@ -30,8 +30,8 @@ from scipy.sparse import csgraph
 from ufl_frames.frames2d import odeco
 from ufl_frames.param.features import Features
 
-__all__ = ["CutMesh", "cancel_pairs", "comb", "cut_graph", "cut_mesh", "face_frames",
-           "face_frames_with", "matchings",
+__all__ = ["CutMesh", "cancel_pairs", "comb", "counterclockwise", "cut_graph", "cut_mesh",
+           "face_frames", "face_frames_with", "matchings",
            "singular_vertices", "triangle_components", "wedges"]
 
 QUARTER = np.pi / 2
@@ -57,6 +57,13 @@ def relabel(angle, l1, l2, k):
     k = np.mod(k, 4)
     odd = (k % 2) == 1
     return angle + k * QUARTER, np.where(odd, l2, l1), np.where(odd, l1, l2)
+
+
+def counterclockwise(x: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """``cells`` (m, 3) with the clockwise triangles of ``x`` (n, 2) turned over."""
+    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
+    clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    return np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
 
 
 def face_frames(cells: np.ndarray, q: np.ndarray, frames=None):
@@ -521,9 +528,7 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     if features is not None and np.shape(features.cell_region) != (cells.shape[0],):
         raise ValueError(f"the features give {np.size(features.cell_region)} regions for "
                          f"{cells.shape[0]} triangles")
-    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
-    clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
-    cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
+    cells = counterclockwise(x, cells)
     q = np.asarray(q, dtype=np.float64)
     frames = odeco.q_to_frames(q)
     angle, l1, l2 = face_frames_with(cells, q, given_frames, frames)

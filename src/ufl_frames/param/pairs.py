@@ -146,9 +146,7 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
     x = np.asarray(x, dtype=np.float64)[:, :2]
     cells = np.asarray(cells, dtype=np.int64)
     q = np.asarray(q, dtype=np.float64)
-    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
-    clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
-    cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
+    cells = cutting.counterclockwise(x, cells)
     edges, faces = cutting.interior_edges(cells)
     singular, turns = _singular(cells, q, edges, faces, given_frames)
     positive, negative = singular[turns == 1], singular[turns == -1]
@@ -165,8 +163,7 @@ def remove_close_pairs(x, cells, q, edge, within: float = CLOSER_THAN,
     if given_frames is not None:
         blocked[cells[given_frames[0]].ravel()] = True
     n = x.shape[0]
-    neighbours = sp.csr_matrix((np.ones(2 * edges.shape[0]),
-                                (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n))
+    neighbours = _vertex_graph(edges, n)
     removed, kept, used, changed = [], [], set(), []
     q_new, current = q.copy(), np.sort(singular)  # the singular vertices left
     for d, i, j in close:
@@ -239,21 +236,37 @@ def _patch(x, cells, neighbours, a, b, d, on_boundary):
     ab = x[b] - x[a]
     t = np.clip((x - x[a]) @ ab / max(float(ab @ ab), 1e-300), 0.0, 1.0)
     near = np.linalg.norm(x - (x[a] + t[:, None] * ab), axis=1) <= reach
-    # the component of the near vertices that holds a (graph of mesh edges)
-    sub = neighbours.multiply(near[:, None]).multiply(near[None, :]).tocsr()
-    sub.eliminate_zeros()  # csgraph counts stored zeros as edges
-    _, label = csgraph.connected_components(sub, directed=False)
-    near &= label == label[a]
+    near = _component(neighbours, near, a)
     triangles = np.flatnonzero(near[cells].any(axis=1))
-    inside = np.zeros(x.shape[0], dtype=bool)
+    return _free_vertices(cells, triangles, on_boundary), triangles
+
+
+def _vertex_graph(edges, n):
+    """The mesh's vertex adjacency (n, n), symmetric, from its edges (E, 2)."""
+    return sp.csr_matrix((np.ones(2 * edges.shape[0]),
+                          (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n))
+
+
+def _component(neighbours, near, v):
+    """``near`` (n,) bool restricted to its mesh-connected component that holds ``v``."""
+    rows, cols = neighbours.nonzero()
+    both = near[rows] & near[cols]
+    sub = sp.csr_matrix((np.ones(int(both.sum())), (rows[both], cols[both])),
+                        shape=neighbours.shape)
+    _, label = csgraph.connected_components(sub, directed=False)
+    return near & (label == label[v])
+
+
+def _free_vertices(cells, triangles, on_boundary):
+    """The vertices all of whose triangles are among ``triangles``, off the domain's
+    boundary (``on_boundary`` (n,) bool)."""
+    inside = np.zeros(on_boundary.shape[0], dtype=bool)
     inside[cells[triangles].ravel()] = True
-    outside = np.ones(x.shape[0], dtype=bool)
     rest = np.ones(cells.shape[0], dtype=bool)
     rest[triangles] = False
-    outside[:] = False
+    outside = np.zeros(on_boundary.shape[0], dtype=bool)
     outside[cells[rest].ravel()] = True
-    free = np.flatnonzero(inside & ~outside & ~on_boundary)
-    return free, triangles
+    return np.flatnonzero(inside & ~outside & ~on_boundary)
 
 
 def _is_disk(cells, triangles) -> bool:
@@ -437,16 +450,13 @@ def absorb_at_acute_corners(x, cells, q, features: Features | None = None) -> Ab
     corners = acute_corners(x, cells)
     if corners.size == 0:
         return AbsorbedCorners(q=q)
-    e1, e2 = x[cells[:, 1]] - x[cells[:, 0]], x[cells[:, 2]] - x[cells[:, 0]]
-    clockwise = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
-    cells = np.where(clockwise[:, None], cells[:, [0, 2, 1]], cells)
+    cells = cutting.counterclockwise(x, cells)
     edges, faces = cutting.interior_edges(cells)
     singular, turns = _singular(cells, q, edges, faces)
     minus_all = singular[turns == -1]
     blocked, rim = _blocked_vertices(x, cells, edges, faces, features)
     n = x.shape[0]
-    neighbours = sp.csr_matrix((np.ones(2 * edges.shape[0]),
-                                (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n))
+    neighbours = _vertex_graph(edges, n)
     length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
     h = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n) / np.maximum(
         np.bincount(edges.ravel(), minlength=n), 1)
@@ -492,22 +502,9 @@ def _corner_patch(x, cells, neighbours, v, b, reach, on_boundary):
     mesh-connected component of the vertices within ``reach`` that holds ``v`` (and
     ``b``), their triangles; free are the vertices all of whose triangles are in it, off
     the domain's boundary."""
-    near = np.linalg.norm(x - x[v], axis=1) <= reach
-    rows, cols = neighbours.nonzero()
-    both = near[rows] & near[cols]
-    sub = sp.csr_matrix((np.ones(int(both.sum())), (rows[both], cols[both])),
-                        shape=neighbours.shape)
-    _, label = csgraph.connected_components(sub, directed=False)
-    near &= label == label[v]
+    near = _component(neighbours, np.linalg.norm(x - x[v], axis=1) <= reach, v)
     triangles = np.flatnonzero(near[cells].all(axis=1))
-    outside = np.zeros(x.shape[0], dtype=bool)
-    rest = np.ones(cells.shape[0], dtype=bool)
-    rest[triangles] = False
-    outside[cells[rest].ravel()] = True
-    inside = np.zeros(x.shape[0], dtype=bool)
-    inside[cells[triangles].ravel()] = True
-    free = np.flatnonzero(inside & ~outside & ~on_boundary)
-    return free, triangles
+    return _free_vertices(cells, triangles, on_boundary), triangles
 
 
 def _corner_unusable(patch, cells, blocked, singular, v, b):
