@@ -22,6 +22,7 @@ Pure NumPy and SciPy (Gmsh is imported only by :func:`file_size_samples`).
 """
 
 import ast
+import functools
 import math
 import operator
 from collections.abc import Callable
@@ -215,17 +216,14 @@ class SizeTarget:
                 raise ValueError("size samples must be finite with h > 0")
             object.__setattr__(self, "samples", samples)
 
+    @functools.cached_property
     def _interpolator(self) -> "_SampleInterpolator":
-        """The samples' interpolator, triangulated on the first call and kept (a file's
+        """The samples' interpolator, triangulated on first use and kept (a file's
         samples number 10⁴–10⁵ and the target is evaluated several times a run)."""
-        cached = self.__dict__.get("_cached_interpolator")
-        if cached is None:
-            cached = _SampleInterpolator(self.samples)
-            object.__setattr__(self, "_cached_interpolator", cached)
-        return cached
+        return _SampleInterpolator(self.samples)
 
     def __getstate__(self):  # a pickled target is triangulated again where it is used
-        return {k: v for k, v in self.__dict__.items() if k != "_cached_interpolator"}
+        return {k: v for k, v in self.__dict__.items() if k != "_interpolator"}
 
     @classmethod
     def uniform(cls, weight: float = DEFAULT_SIZE_WEIGHT) -> "SizeTarget":
@@ -275,7 +273,7 @@ class SizeTarget:
         if self.kind == "uniform":
             h = np.ones(len(x))
         elif self.kind == "samples":
-            h = self._interpolator()(px, py)
+            h = self._interpolator(px, py)
         else:
             h = np.broadcast_to(np.asarray(self.function(px, py), dtype=np.float64),
                                 px.shape).copy()
