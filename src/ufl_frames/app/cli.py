@@ -226,7 +226,8 @@ def _add_solve_arguments(solve: argparse.ArgumentParser) -> None:
     solve.add_argument("--quads", action="store_true",
                        help="also make a quad mesh of the field (integer-grid map, iso-line "
                        "extraction): quads.msh (Gmsh MSH 4.1), quads.vtu, quads.png and "
-                       "'quads' in summary.json")
+                       "'quads' in summary.json; the quads' boundary and curve nodes are "
+                       "moved onto the CAD curves, as by the mesh command")
     solve.add_argument("--quad-size", type=_positive_float, default=None, metavar="S",
                        help="the quads' mean edge length (default: with --quads the triangles' "
                        "mean edge length; with --param only, about one quad per 8 triangles)")

@@ -85,8 +85,9 @@ class RunConfig:
     quad_count: int | None = None
     #: Write the field's files (frames.*, convergence.png); ``ufl-frames mesh`` does not.
     field_files: bool = True
-    #: Move the quads' boundary nodes onto the CAD curves (:mod:`ufl_frames.mesh.cad`).
-    on_cad: bool = False
+    #: Move the quads' boundary and curve nodes onto the CAD curves
+    #: (:mod:`ufl_frames.mesh.cad`): ``solve --quads`` and ``mesh`` both do.
+    on_cad: bool = True
     #: Where no valid quad mesh comes out at the default quad size, take a smaller one
     #: that gives one (``ufl-frames mesh`` without a size or count asked).
     adapt_quad_size: bool = False

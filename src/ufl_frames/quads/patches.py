@@ -24,7 +24,15 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    +1) does not (one quad with a 180° corner); two valence-5 ones next to a 240° corner
    (a sharp leading edge) go onto the corner, five quads of 48°.
    With every arc at least 1 (``collapse_below=0``) a solution always exists: the real
-   lengths solve the equalities, so the rational cone they span holds integer points;
+   lengths solve the equalities, so the rational cone they span holds integer points.
+   An arc along a curved boundary or interior curve gets at least as many quad edges as
+   keep each edge's chord within ``sagitta`` (:data:`CHORD_SAGITTA`) of the quad size off
+   the curve (:func:`min_curve_lengths`): an arc that turns by θ with map length L (so a
+   quad size ℓ/L for its plane length ℓ, on a radius ℓ/θ) needs n edges with
+   (ℓ/θ)(1 − cos(θ/2n)) ≤ sagitta · ℓ/L, i.e. n ≥ θ / (2 arccos(1 − sagitta · θ/L)); the
+   extra edges go on across the patches (opposite sides stay equal), a sheet of narrower
+   quads from the curve to wherever the program closes it. A small hole a few quads
+   round would otherwise be a polygon of a few chords;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
    integer positions along each arc (uniform in the map), the inside by transfinite
    (Coons) blending in the patch's rectangle of the parameter plane, and every point
@@ -58,10 +66,16 @@ from ufl_frames.quads.improve import onto_boundary
 from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
 from ufl_frames.quads.motorcycles import rot
 
-__all__ = ["COLLAPSE_BELOW", "integer_lengths", "patch_quads", "quads_of_map"]
+__all__ = ["CHORD_SAGITTA", "COLLAPSE_BELOW", "arc_turning", "integer_lengths",
+           "min_curve_lengths", "patch_quads", "quads_of_map"]
 
 #: Arcs shorter than this (in quads) may get length 0 (:func:`integer_lengths`).
 COLLAPSE_BELOW = 0.5
+#: A quad edge along a curved boundary or interior curve stays within this share of the
+#: quad size of its curve (its chord's sagitta; :func:`min_curve_lengths`). 0.04 keeps a
+#: hole about 16 quads round at least 17 edges round (a polygon 0.2 % short of the disc
+#: per 1 % ... see benchmarks/README.md, "Quads on the CAD curves").
+CHORD_SAGITTA = 0.04
 
 #: The angles (degrees) the quads at a singular vertex glued to the boundary may have on
 #: average (:meth:`_Points.valid_fan`): three at 60° on a straight boundary, five at 48°
@@ -107,8 +121,50 @@ def _solve(lay: Layout, lower: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.rint(result.x[:A]).astype(np.int64)
 
 
+def arc_turning(mc, arc) -> tuple[float, float]:
+    """How far ``arc`` turns in the plane (radians, ≥ 0) and its plane length.
+
+    The arc's pieces are straight in the plane (one triangle each); the turns between
+    consecutive pieces are summed and spread over the whole arc as a constant curvature
+    (the turns at its two ends, shared with the next arcs, are not seen: the sum is scaled
+    by the arc's length over the length between its first and last pieces' middles). One
+    piece alone: 0.
+    """
+    points = [_physical(mc, arc.pieces[0][0], arc.pieces[0][1])]
+    points += [_physical(mc, f, p1) for f, _, p1, _ in arc.pieces]
+    step = np.diff(np.asarray(points), axis=0)
+    length = np.linalg.norm(step, axis=1)
+    step, length = step[length > 1e-14], length[length > 1e-14]
+    total = float(length.sum())
+    if length.size < 2:
+        return 0.0, total
+    heading = np.arctan2(step[:, 1], step[:, 0])
+    turns = np.angle(np.exp(1j * np.diff(heading)))
+    inner = total - 0.5 * (length[0] + length[-1])
+    return abs(float(turns.sum())) * total / float(inner), total
+
+
+def min_curve_lengths(lay: Layout, sagitta: float = CHORD_SAGITTA) -> np.ndarray:
+    """Per arc of ``lay`` the fewest quad edges that keep every edge of a boundary or
+    curve arc within ``sagitta`` of the quad size off its curve (the module text, step 1):
+    n ≥ θ / (2 arccos(1 − sagitta · θ/L)), θ the arc's turn (:func:`arc_turning`), L its
+    map length; 0 for the other arcs and where ``sagitta`` is not positive."""
+    need = np.zeros(len(lay.arcs), dtype=np.int64)
+    if sagitta <= 0:
+        return need
+    for a, arc in enumerate(lay.arcs):
+        if not (arc.boundary or arc.curve) or arc.length <= 0 or not arc.pieces:
+            continue
+        theta, _ = arc_turning(lay.motorcycles, arc)
+        half = math.acos(max(-1.0, 1.0 - sagitta * theta / float(arc.length)))
+        if half > 0:  # else straight (to rounding): no bound
+            need[a] = math.ceil(theta / (2 * half) - 1e-9)
+    return need
+
+
 def integer_lengths(lay: Layout, weights=None,
-                    collapse_below: float = COLLAPSE_BELOW) -> np.ndarray:
+                    collapse_below: float = COLLAPSE_BELOW,
+                    sagitta: float = CHORD_SAGITTA) -> np.ndarray:
     """Integer lengths n (one per arc of ``lay``) with equal opposite sides per patch,
     closest to the arcs' lengths (see the module text, step 1).
 
@@ -116,6 +172,9 @@ def integer_lengths(lay: Layout, weights=None,
         lay: the layout.
         weights: w_a per arc (default 1).
         collapse_below: arcs shorter than this may get 0 (0: every arc at least 1).
+        sagitta: a curved boundary or curve arc gets at least the edges that keep their
+            chords within this share of the quad size off the curve
+            (:func:`min_curve_lengths`; 0: none asked).
 
     Returns:
         n (A,) int64. Raises :class:`~ufl_frames.quads.charts.LayoutError` where there is
@@ -126,13 +185,15 @@ def integer_lengths(lay: Layout, weights=None,
     lower = np.where(L < collapse_below, 0.0, 1.0)
     # the features' curves keep a length: a collapse would glue two of their points
     lower[[a for a, arc in enumerate(lay.arcs) if arc.curve]] = 1.0
+    need = min_curve_lengths(lay, sagitta)
+    lower = np.where(need >= 2, np.maximum(lower, need), lower)  # 1: as before (collapses)
     for _ in range(L.size + 1):
         n = _solve(lay, lower, w)
         points = _Points(lay, n)
         bad = points.bad_merges()
         if not bad:
             return n
-        lower[bad] = 1.0
+        lower[bad] = np.maximum(lower[bad], 1.0)
     raise LayoutError("the collapses of thin patches keep merging singular vertices")
 
 
