@@ -99,10 +99,19 @@ def test_annulus_is_one_patch_across_the_seam(scale):
     assert radial.stop == "boundary"
     n_r = int(np.rint(scale * np.log(r1 / r0)))
     around = [a.length for a in lay.arcs if a.boundary]
-    n_theta = int(np.rint(around[0]))
     assert around == pytest.approx([2 * np.pi * scale] * 2, rel=0.02)
+    # as many edges round as the map's length, but at least as many as keep each edge's
+    # chord within CHORD_SAGITTA of the quad size (2π r / length) off its circle
+    n_theta = int(np.rint(around[0]))
+    size = 2 * np.pi * r0 / around[0]
+    while r0 * (1 - np.cos(np.pi / n_theta)) > patches.CHORD_SAGITTA * size:
+        n_theta += 1
+    assert n_theta == {2.0: 16, 4.0: 25, 6.0: 38}[scale]  # the coarsest one has more edges
     assert sorted(n.tolist()) == [n_r, n_theta, n_theta]
     assert_polar_grid(quads, n_theta, n_r, r0, r1)
+    # without the bound: the map's own length round
+    assert sorted(patches.integer_lengths(lay, sagitta=0).tolist()) == [n_r] + [
+        int(np.rint(around[0]))] * 2
 
 
 def quarter_field(x, centre=(-0.07, -0.13)):

@@ -72,9 +72,11 @@ __all__ = ["CHORD_SAGITTA", "COLLAPSE_BELOW", "arc_turning", "integer_lengths",
 #: Arcs shorter than this (in quads) may get length 0 (:func:`integer_lengths`).
 COLLAPSE_BELOW = 0.5
 #: A quad edge along a curved boundary or interior curve stays within this share of the
-#: quad size of its curve (its chord's sagitta; :func:`min_curve_lengths`). 0.04 keeps a
-#: hole about 16 quads round at least 17 edges round (a polygon 0.2 % short of the disc
-#: per 1 % ... see benchmarks/README.md, "Quads on the CAD curves").
+#: quad size of its curve (its chord's sagitta; :func:`min_curve_lengths`). With 0.04 a
+#: hole 4, 6, 10, 16 quads round in the map gets at least 9, 11, 14, 18 edges (its polygon
+#: 7.9, 5.3, 3.3, 2.0 % short of the hole's area instead of 36, 17, 6.5, 2.6 %); 20 quads
+#: round and more keep their count. Chosen so that ``plate_holes`` at 200 quads is within
+#: 0.5 % of its area (benchmarks/README.md, "Quads on the CAD curves").
 CHORD_SAGITTA = 0.04
 
 #: The angles (degrees) the quads at a singular vertex glued to the boundary may have on
