@@ -87,7 +87,7 @@ def test_quad_files_read_back(piano_fields, tmp_path):
         assert "scaled_jacobian" in (out / "quads.vtu").read_text()
 
 
-def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
+def test_run_solve_quads_and_a_size_too_coarse(tmp_path, monkeypatch):
     out = Path(COMM.bcast(str(tmp_path), root=0))
     summary = run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "a", quiet=True,
                             quads=True, quad_size=0.1), comm=COMM)
@@ -98,9 +98,17 @@ def test_run_solve_quads_and_a_size_too_coarse(tmp_path):
     n_theta = found["vertices"] - found["quads"]
     assert n_theta >= 8 and found["quads"] % n_theta == 0
     assert found["interior_valence"] == {"4": found["quads"] - n_theta}
-    # the refusal says which smaller size works (the annulus is 0.5 wide: at 2.0 and 1.4
-    # no quad fits across; at 1.0 one layer of quads does, the circles' model points being
-    # smooth joints that a quad edge may span)
+    # at quad size 2.0 (the map 1.6 quads round the inner circle) the chords' bound still
+    # puts 7 edges round each circle (patches.CHORD_SAGITTA): one ring of valid quads
+    coarse = run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "c", quiet=True,
+                           quads=True, quad_size=2.0), comm=COMM)["quads"]
+    assert coarse["valid"] and coarse["quads"] == 7 and coarse["vertices"] == 14
+    # without it, the refusal says which smaller size works (the annulus is 0.5 wide: at
+    # 2.0 and 1.4 no quad fits across; at 1.0 one layer of quads does, the circles' model
+    # points being smooth joints that a quad edge may span)
+    from ufl_frames.quads import patches
+
+    monkeypatch.setattr(patches, "CHORD_SAGITTA", 0.0)
     with pytest.raises(RunError, match=r"cannot make quads of this field: .*quad size"
                        r".*\(quad size 1 works\)") as failed:
         run(RunConfig("annulus", mesh_size=0.1, max_it=50, out=out / "b", quiet=True, quads=True,

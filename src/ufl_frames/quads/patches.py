@@ -146,11 +146,13 @@ def arc_turning(mc, arc) -> tuple[float, float]:
     return abs(float(turns.sum())) * total / float(inner), total
 
 
-def min_curve_lengths(lay: Layout, sagitta: float = CHORD_SAGITTA) -> np.ndarray:
+def min_curve_lengths(lay: Layout, sagitta: float | None = None) -> np.ndarray:
     """Per arc of ``lay`` the fewest quad edges that keep every edge of a boundary or
     curve arc within ``sagitta`` of the quad size off its curve (the module text, step 1):
     n ≥ θ / (2 arccos(1 − sagitta · θ/L)), θ the arc's turn (:func:`arc_turning`), L its
-    map length; 0 for the other arcs and where ``sagitta`` is not positive."""
+    map length; 0 for the other arcs and where ``sagitta`` is not positive (None:
+    :data:`CHORD_SAGITTA`)."""
+    sagitta = CHORD_SAGITTA if sagitta is None else sagitta
     need = np.zeros(len(lay.arcs), dtype=np.int64)
     if sagitta <= 0:
         return need
@@ -166,7 +168,7 @@ def min_curve_lengths(lay: Layout, sagitta: float = CHORD_SAGITTA) -> np.ndarray
 
 def integer_lengths(lay: Layout, weights=None,
                     collapse_below: float = COLLAPSE_BELOW,
-                    sagitta: float = CHORD_SAGITTA) -> np.ndarray:
+                    sagitta: float | None = None) -> np.ndarray:
     """Integer lengths n (one per arc of ``lay``) with equal opposite sides per patch,
     closest to the arcs' lengths (see the module text, step 1).
 
@@ -176,7 +178,7 @@ def integer_lengths(lay: Layout, weights=None,
         collapse_below: arcs shorter than this may get 0 (0: every arc at least 1).
         sagitta: a curved boundary or curve arc gets at least the edges that keep their
             chords within this share of the quad size off the curve
-            (:func:`min_curve_lengths`; 0: none asked).
+            (:func:`min_curve_lengths`; None: :data:`CHORD_SAGITTA`; 0: none asked).
 
     Returns:
         n (A,) int64. Raises :class:`~ufl_frames.quads.charts.LayoutError` where there is
@@ -187,7 +189,7 @@ def integer_lengths(lay: Layout, weights=None,
     lower = np.where(L < collapse_below, 0.0, 1.0)
     # the features' curves keep a length: a collapse would glue two of their points
     lower[[a for a, arc in enumerate(lay.arcs) if arc.curve]] = 1.0
-    need = min_curve_lengths(lay, sagitta)
+    need = min_curve_lengths(lay, CHORD_SAGITTA if sagitta is None else sagitta)
     lower = np.where(need >= 2, np.maximum(lower, need), lower)  # 1: as before (collapses)
     for _ in range(L.size + 1):
         n = _solve(lay, lower, w)
