@@ -93,14 +93,21 @@ def test_stage_at_a_finer_size(size):
     assert np.abs(quads.points[interface.ravel(), 0] - 0.43).max() < 1e-9
 
 
-def test_a_size_too_coarse_is_adapted_where_asked():
-    """The annulus (0.5 wide) at quad size 2: no quad fits across. Without ``adapt`` the
-    refusal names the smaller size that works; with it that size's mesh is returned, and
-    its measures say which size was asked, which was used and why."""
+def test_a_size_too_coarse_is_adapted_where_asked(monkeypatch):
+    """The annulus (0.5 wide) at quad size 2: the chords' bound puts enough edges round
+    the circles for one ring of valid quads. Without that bound no quad fits across:
+    without ``adapt`` the refusal names the smaller size that works; with it that size's
+    mesh is returned, and its measures say which size was asked, which was used and why."""
     from planar_meshes import annulus, annulus_field
+
+    from ufl_frames.quads import patches
 
     x, cells = annulus(8, 64)
     mesh = cut.cut_mesh(x, cells, annulus_field(x))
+    quads, quality = _quad_mesh_or_advice(mesh, 2.0)
+    assert quality["valid"] and "adapted_size" not in quality
+    assert quads.num_quads == 7  # 1.6 quads round the inner circle in the map
+    monkeypatch.setattr(patches, "CHORD_SAGITTA", 0.0)
     with pytest.raises(ValueError, match=r"\(quad size 1\.4 works\)"):
         _quad_mesh_or_advice(mesh, 2.0)
     quads, quality = _quad_mesh_or_advice(mesh, 2.0, adapt=True)
