@@ -1,8 +1,8 @@
 """``ufl-frames solve --quads`` on a plate with a hole at a coarse quad size: the quads'
 boundary nodes lie on the CAD curves (the circle and the plate's sides to 1e-9; the
-triangles' chords left them ~1e-3 inside the hole) and the hole is a polygon of enough
-edges that the quads' area is within 0.5 % of the exact one (the map's own count round
-the hole, 10 edges, leaves it 0.6 % short of the disc alone).
+triangles' chords left them up to 0.0064 inside the hole) and the hole is a polygon of
+enough edges that the quads' area is within 0.5 % of the exact one (a 10-gon, the map's
+own count round the hole, would leave the quads 0.6 % over it; before, +0.9 %).
 
 Truth: the geometry itself (circle centre and radius, the rectangle's sides, the area
 1.5 − π r²), the nodes and quads read back from ``quads.msh`` by Gmsh. In-process and
