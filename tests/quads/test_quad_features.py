@@ -30,6 +30,7 @@ from ufl_frames.quads.features import (
     chord_allowances,
     curve_lengths,
     feature_problems,
+    locate,
     region_areas,
 )
 from ufl_frames.quads.measures import check_quad_mesh, quad_quality
@@ -272,3 +273,41 @@ def test_a_chord_across_smooth_joints_is_allowed_the_turn_of_the_curves_under_it
     theta = np.radians(48.0)
     assert lengths == pytest.approx({1: 2 * theta**2 / 24})
     assert areas == pytest.approx({7: 2 * theta / 12})
+
+
+def sliver_row_under_a_big_triangle():
+    """80 small triangles in a row, 1 × 0.025, under one triangle 1 wide and 0.975 tall
+    (region 2; the row region 1): just above the row, the 12 nearest centroids are all
+    the small triangles', not the big one's (0.3 away), which holds the point."""
+    n = 40
+    bottom = np.column_stack([np.arange(n + 1) / n, np.zeros(n + 1)])
+    top = np.column_stack([np.arange(n + 1) / n, np.full(n + 1, 0.025)])
+    x = np.vstack([bottom, top, [[0.5, 1.0]]])
+    cells = [[i, i + 1, n + 2 + i] for i in range(n)]
+    cells += [[i, n + 2 + i, n + 1 + i] for i in range(n)]
+    cells.append([n + 1, 2 * n + 1, 2 * n + 2])
+    return x, np.array(cells, dtype=np.int64)
+
+
+def test_a_point_in_a_triangle_far_beyond_its_nearest_centroids_is_located():
+    """The big triangle holds (0.5, 0.03) and (0.2, 0.026) though 80 centroids are
+    nearer; (0.3, 0.01) lies on the row's edge x = 0.3 (either triangle beside it);
+    (0.5, -0.01) and (0.02, 0.5) are outside."""
+    x, cells = sliver_row_under_a_big_triangle()
+    p = np.array([[0.5, 0.03], [0.2, 0.026], [0.3, 0.01], [0.5, -0.01], [0.02, 0.5]])
+    found = locate(x, cells, p)
+    assert found[:2].tolist() == [len(cells) - 1] * 2
+    assert found[2] >= 0 and np.isclose(np.abs(x[cells[found[2]], 0] - 0.3).min(), 0.0)
+    assert found[3:].tolist() == [-1, -1]
+
+
+def test_a_point_on_a_long_curve_edge_beyond_its_nearest_midpoints_is_found():
+    """A point on the long edge (0, 0)–(1, 0), whose midpoint is 0.4 away, with 30 short
+    edges of another curve nearer (x = 0.95, y in 0.01..0.31): it lies on the long one; a
+    point off both lies on none."""
+    from ufl_frames.quads.features import _on_curve
+
+    x = np.array([[0.0, 0.0], [1.0, 0.0]] + [[0.95, 0.01 * (k + 1)] for k in range(31)])
+    edges = np.array([[0, 1]] + [[k + 2, k + 3] for k in range(30)], dtype=np.int64)
+    found = _on_curve(x, edges, np.array([[0.9, 0.0], [0.9, 0.05]]), 1e-9)
+    assert found.tolist() == [0, -1]

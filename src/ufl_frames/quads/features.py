@@ -67,15 +67,47 @@ def _candidates(x, cells, p):
     return candidates, _barycentric(x, cells, candidates, p)
 
 
+#: The barycentric coordinate above which a point counts as in a triangle.
+HOLDS = -1e-6
+
+
+def _holding(x, cells, p):
+    """Every triangle that holds each point of ``p`` (k, 2): k arrays of triangle indices
+    (a point on an edge or vertex is held by each of its triangles).
+
+    Exhaustive, unlike the :data:`NEAREST` centroids (which miss the triangle under a
+    point where the triangles are slivers, such as the halves of a transfinite grid's
+    graded quads): a triangle holding p has its centroid no farther from p than from its
+    own farthest vertex, so the triangles whose centroid lies within the largest such
+    distance of the mesh include all of them."""
+    corners = x[cells]
+    centroids = corners.mean(axis=1)
+    reach = float(np.linalg.norm(corners - centroids[:, None], axis=2).max(initial=0.0))
+    tree = cKDTree(centroids)
+    out = []
+    for point, near in zip(p, tree.query_ball_point(p, reach * (1 + 1e-9)), strict=True):
+        near = np.asarray(near, dtype=np.int64)
+        bary = _barycentric(x, cells, near[None, :], point[None, :])[0]
+        out.append(near[bary.min(axis=1) >= HOLDS] if near.size else near)
+    return out
+
+
 def locate(x, cells, p) -> np.ndarray:
     """The triangle of ``cells`` on ``x`` that holds each point of ``p`` (k, 2): the one
-    among the nearest whose smallest barycentric coordinate is largest (−1 where that is
-    under −10⁻⁶: outside the mesh)."""
-    candidates, bary = _candidates(x, cells, np.asarray(p, dtype=np.float64))
+    among the nearest whose smallest barycentric coordinate is largest, or where none of
+    them holds it, any that does (:func:`_holding`); −1 where none holds it (smallest
+    coordinate under −10⁻⁶: outside the mesh)."""
+    p = np.asarray(p, dtype=np.float64)
+    candidates, bary = _candidates(x, cells, p)
     worst = bary.min(axis=2)
     best = worst.argmax(axis=1)
     found = candidates[np.arange(candidates.shape[0]), best]
-    return np.where(worst[np.arange(best.size), best] >= -1e-6, found, -1)
+    found = np.where(worst[np.arange(best.size), best] >= HOLDS, found, -1)
+    missed = np.flatnonzero(found < 0)
+    for i, held in zip(missed, _holding(x, cells, p[missed]), strict=True):
+        if held.size:
+            found[i] = held[0]
+    return found
 
 
 def _quad_edges(quads):
@@ -113,8 +145,22 @@ def _on_curve(x, curve_edges, p, tol, within=None):
     distance = np.linalg.norm(w - t[..., None] * d, axis=2)
     best = distance.argmin(axis=1)
     found = near[np.arange(p.shape[0]), best]
-    limit = tol if within is None else np.maximum(within, tol)
-    return np.where(distance[np.arange(p.shape[0]), best] <= limit, found, -1)
+    limit = np.broadcast_to(tol if within is None else np.maximum(within, tol), p.shape[0])
+    found = np.where(distance[np.arange(p.shape[0]), best] <= limit, found, -1)
+    # The nearest midpoints miss a long edge beside short ones: every edge within the
+    # limit of p has its midpoint within the limit plus its half length.
+    half = 0.5 * float(np.linalg.norm(b - a, axis=1).max())
+    missed = np.flatnonzero(found < 0)
+    for i, near in zip(missed, tree.query_ball_point(p[missed], limit[missed] + half), strict=True):
+        near = np.asarray(near, dtype=np.int64)
+        if near.size:
+            d, w = b[near] - a[near], p[i] - a[near]
+            t = np.clip(np.einsum("cj,cj->c", w, d)
+                        / np.maximum(np.einsum("cj,cj->c", d, d), 1e-300), 0.0, 1.0)
+            distance = np.linalg.norm(w - t[:, None] * d, axis=1)
+            if distance.min() <= limit[i]:
+                found[i] = near[distance.argmin()]
+    return found
 
 
 #: A straight quad edge (no chain under it) with both ends on a curve lies along it where
@@ -223,13 +269,16 @@ def feature_problems(quad_mesh, x, cells, features: Features) -> list[str]:
     points = quad_mesh.points[:, :2]
     quads = np.asarray(quad_mesh.quads, dtype=np.int64)
     candidates, bary = _candidates(x, cells, points)
-    holds = bary.min(axis=2) >= -1e-6  # (points, candidates): the point in the triangle
+    holds = bary.min(axis=2) >= HOLDS  # (points, candidates): the point in the triangle
     corner_regions = region[candidates]
     straddle = 0
     for k in range(4):
         c = quads[:, k]
         ok = np.any(holds[c] & (corner_regions[c] == quad_region[:, None]), axis=1)
-        straddle += int(np.count_nonzero(~ok & (quad_region >= 0)))
+        doubt = np.flatnonzero(~ok & (quad_region >= 0))  # the nearest may miss slivers
+        held = _holding(x, cells, points[c[doubt]])
+        straddle += sum(int(not np.any(region[h] == quad_region[q]))
+                        for q, h in zip(doubt, held, strict=True))
     if straddle:
         problems.append(f"{straddle} quad corners lie outside their quad's region (a quad "
                         "straddles an interface)")
