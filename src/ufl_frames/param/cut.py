@@ -31,7 +31,7 @@ from ufl_frames.frames2d import odeco
 from ufl_frames.param.features import Features
 
 __all__ = ["CutMesh", "cancel_pairs", "comb", "counterclockwise", "cut_graph", "cut_mesh",
-           "face_frames", "face_frames_with", "matchings",
+           "face_frames", "face_frames_with", "junction_frames", "matchings",
            "singular_vertices", "triangle_components", "wedges"]
 
 QUARTER = np.pi / 2
@@ -89,6 +89,49 @@ def face_frames_with(cells: np.ndarray, q: np.ndarray, given=None, frames=None):
         angle, l1, l2 = angle.copy(), l1.copy(), l2.copy()
         angle[triangles], l1[triangles], l2[triangles] = a, b, c
     return angle, l1, l2
+
+
+def junction_frames(cells: np.ndarray, nodes: np.ndarray, frames, given=None):
+    """The frames of the triangles at the junctions ``nodes`` of interior curves, from
+    their other vertices' crosses, as ``given`` frames (:func:`face_frames_with`):
+    (triangles, angle, l1, l2), with ``given``'s own triangles left as they were.
+
+    A junction's vertex cross is held to the average of its curves' (on the boundary:
+    the two boundary edges', as at a corner), which fits none of the sectors between the
+    curves: at deal.II step-49's slit tip the slit's cross is 45° off the interfaces'.
+    A sector one triangle wide then has the frame of three crosses up to 60° apart, and
+    its two curve edges, a quad corner apart, can both take the same constant coordinate
+    in the map (the sector folds flat). Its two other vertices lie on the two curves,
+    each cross aligned with its own: their mean turns the short way between them, as
+    the quad corner does. A triangle with one other vertex takes that one's frame.
+
+    Args:
+        cells: triangles (m, 3).
+        nodes: the junctions' vertices.
+        frames: ``odeco.q_to_frames(q)`` (lengths (n, 2), angles (n,)).
+        given: (triangles, angle, l1, l2) already given (kept), or None.
+
+    Returns:
+        The given frames with the junctions' triangles added (``given`` where none).
+    """
+    lengths, angles = frames
+    at = np.isin(cells, np.asarray(nodes, dtype=np.int64))
+    fan = np.flatnonzero(at.any(axis=1) & ~at.all(axis=1))
+    if given is not None:
+        fan = np.setdiff1d(fan, given[0])
+    if fan.size == 0:
+        return given
+    other = ~at[fan]  # (t, 3): the vertices that count
+    first = cells[fan, np.argmax(other, axis=1)]
+    t = angles[cells[fan]]
+    k = np.rint((angles[first][:, None] - t) / QUARTER).astype(np.int64)
+    t, l1, l2 = relabel(t, lengths[cells[fan], 0], lengths[cells[fan], 1], k)
+    w = other / other.sum(axis=1, keepdims=True)
+    angle = angles[first] + np.sum(w * _wrap(t - angles[first][:, None]), axis=1)
+    mine = (fan, angle, np.sum(w * l1, axis=1), np.sum(w * l2, axis=1))
+    if given is None:
+        return mine
+    return tuple(np.concatenate([g, m]) for g, m in zip(given, mine, strict=True))
 
 
 def interior_edges(cells: np.ndarray):
@@ -531,6 +574,8 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     cells = counterclockwise(x, cells)
     q = np.asarray(q, dtype=np.float64)
     frames = odeco.q_to_frames(q)
+    if features is not None and len(features.junction_nodes):
+        given_frames = junction_frames(cells, features.junction_nodes, frames, given_frames)
     angle, l1, l2 = face_frames_with(cells, q, given_frames, frames)
     edges, faces = interior_edges(cells)
     k = matchings(angle, faces)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["Features", "with_smooth_joints"]
+__all__ = ["Features", "with_junctions", "with_smooth_joints"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,8 @@ class Features:
         point_tag: (p,) the point tag of each.
         joints: the model points of ``point_nodes`` that need not be quad vertices
             (:func:`with_smooth_joints`; none by default).
+        junction_nodes: the nodes where interior curves end, turn or meet each other or
+            the boundary (:func:`with_junctions`; none by default).
     """
 
     cell_region: np.ndarray
@@ -41,6 +43,7 @@ class Features:
     point_nodes: np.ndarray
     point_tag: np.ndarray
     joints: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    junction_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def required_points(self) -> np.ndarray:
@@ -140,3 +143,29 @@ def with_smooth_joints(features: Features, x, cells, physical_groups=()) -> Feat
         if len({frozenset(groups_of.get(t, ())) for t in tags}) == 1:
             joints.append(int(v))
     return replace(features, joints=np.asarray(joints, dtype=np.int64))
+
+
+def with_junctions(features: Features, x, junctions) -> Features:
+    """``features`` with the junctions of the interior curves (the points where they
+    end, turn or meet each other or the boundary: :class:`~ufl_frames.mesh.domain.Junction`),
+    each at the model point nearest to it.
+
+    The cut gives the triangles around a junction the frames of their other vertices
+    (:func:`~ufl_frames.param.cut.junction_frames`): the junction's own cross, held to the
+    average of its curves', fits none of the sectors between them.
+
+    Args:
+        features: the features of the triangle mesh.
+        x: the mesh's nodes (n, 2+).
+        junctions: the model's :class:`~ufl_frames.mesh.domain.Junction` records.
+
+    Returns:
+        The features with ``junction_nodes`` set.
+    """
+    x = np.asarray(x, dtype=np.float64)[:, :2]
+    points = np.asarray(features.point_nodes, dtype=np.int64)
+    if not len(junctions) or points.size == 0:
+        return features
+    at = np.array([[j.x, j.y] for j in junctions])
+    nearest = points[np.argmin(np.linalg.norm(x[points][None] - at[:, None], axis=2), axis=1)]
+    return replace(features, junction_nodes=np.unique(nearest).astype(np.int64))

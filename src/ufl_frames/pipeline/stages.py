@@ -62,14 +62,16 @@ class RootField:
 
     ``domain`` is the field's :class:`~ufl_frames.mesh.Domain`; the gathered arrays,
     ``features`` (the model's regions, curves and points on them, with the smooth joints
-    a quad edge may span: :class:`~ufl_frames.param.features.Features`,
-    :func:`~ufl_frames.param.features.with_smooth_joints`) and the
+    a quad edge may span and the interior curves' junctions:
+    :class:`~ufl_frames.param.features.Features`,
+    :func:`~ufl_frames.param.features.with_smooth_joints`,
+    :func:`~ufl_frames.param.features.with_junctions`) and the
     :class:`~ufl_frames.param.cut.CutMesh` (one per set of close ± pairs removed:
     :meth:`_cut_mesh`) live on rank 0 only (None elsewhere).
     """
 
     def __init__(self, frames: FrameField):
-        from ufl_frames.param.features import with_smooth_joints
+        from ufl_frames.param.features import with_junctions, with_smooth_joints
         from ufl_frames.param.gather import gather_features, gather_field
 
         self.domain = frames.domain
@@ -79,6 +81,9 @@ class RootField:
             self.features = with_smooth_joints(
                 self.features, self._arrays[0], self._arrays[1],
                 getattr(frames.domain, "physical_groups", ()))
+            # the triangles at the curves' junctions take their other vertices' frames
+            self.features = with_junctions(self.features, self._arrays[0],
+                                           getattr(frames.domain, "junctions", ()))
         self._cuts = {}
 
     @functools.cached_property
