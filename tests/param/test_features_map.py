@@ -94,3 +94,24 @@ def test_model_points_are_the_geometrys():
     mesh = cut.cut_mesh(x, cells, constant_field(x), features=bare)
     found = {tuple(np.round(p, 12)) for p in x[quantise.model_points(mesh)]}
     assert found == expected
+
+
+def test_a_junctions_triangles_take_their_other_vertices_frames():
+    """A fan at a junction (vertex 0) whose cross is held at 45°, as at a 300° slit tip:
+    the triangle between a vertex of cross 60° and one of 0° (a 60° sector of one
+    triangle) takes 75°, the short way between those two (face_frames gives the three's
+    mean, which the 45° pulls off); a triangle with one other vertex takes its frame;
+    the given triangle keeps its given frame."""
+    cells = np.array([[0, 2, 1], [0, 3, 2]])
+    angles = np.radians([45.0, 60.0, 0.0, 0.0])
+    lengths = np.ones((4, 2))
+    given = cut.junction_frames(cells, np.array([0]), (lengths, angles))
+    assert given[0].tolist() == [0, 1]
+    assert np.degrees(given[1]) % 90 == pytest.approx([75.0, 0.0], abs=1e-12)
+    kept = (np.array([1]), np.array([0.3]), np.array([2.0]), np.array([1.0]))
+    both = cut.junction_frames(cells, np.array([0]), (lengths, angles), kept)
+    assert both[0].tolist() == [1, 0] and both[1][0] == 0.3
+    assert np.degrees(both[1][1]) % 90 == pytest.approx(75.0, abs=1e-12)
+    q = odeco.frames_to_q(lengths, angles)
+    plain, _, _ = cut.face_frames(cells, q)
+    assert abs(np.degrees(plain[0]) % 90 - 75.0) > 10  # what the junction's cross did
