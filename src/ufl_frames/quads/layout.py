@@ -34,11 +34,11 @@ import numpy as np
 
 from ufl_frames.param.seamless import (
     Parametrisation,
-    angle_sums,
     boundary_coordinates,
     curve_edge_ids,
     parametrisation,
     quarter_turn,
+    wrong_corners,
 )
 from ufl_frames.quads.charts import UNIT, LayoutError
 from ufl_frames.quads.motorcycles import QUARTER, Motorcycles, rot
@@ -204,7 +204,7 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
         ends, total = _node_ends(mc, arcs, nodes)
         patches = _faces(arcs, ends, total)
     except LayoutError as e:
-        wrong = _wrong_corners(param)
+        wrong = wrong_corners(param)
         if not mc.folded.any() and not wrong:
             raise
         why = []
@@ -221,24 +221,6 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
         raise LayoutError(f"{e} ({'; '.join(why)})") from e
     return Layout(arcs=arcs, nodes=nodes, patches=patches, traces=traces, motorcycles=mc,
                   folded=np.flatnonzero(mc.folded))
-
-
-def _wrong_corners(param: Parametrisation) -> list:
-    """(vertex, the map's quarter turns, the domain's) of every boundary vertex around
-    which the map's corner angles add up to three eighths of a turn or more away from the
-    domain's (:func:`~ufl_frames.param.seamless.angle_sums`): the map folds there, though
-    none of its triangles need be inverted (its boundary runs backwards next to the
-    vertex). A corner under 45° counted as one quarter turn is less than a quarter turn
-    away; one taken a half turn off is not (a 270° corner the map turns by 90°)."""
-    mesh = param.mesh
-    n = mesh.x.shape[0]
-    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
-    domain = angle_sums(mesh.cells, mesh.x[mesh.cells], n)[boundary]
-    mapped = angle_sums(mesh.cells, param.corner_values(), n)[boundary]
-    off = np.flatnonzero(np.abs(mapped - domain) >= 0.75 * np.pi)
-    quarter = np.pi / 2
-    return [(int(boundary[i]), int(np.rint(mapped[i] / quarter)),
-             int(np.rint(domain[i] / quarter))) for i in off]
 
 
 def _node_ends(mc, arcs, nodes):
