@@ -525,3 +525,32 @@ def test_a_singular_vertex_near_the_boundary(sign, s, monkeypatch):
         assert n[to_side[0]] == 0
         glued, _ = patches.patch_quads(lay, n)
         assert quad_quality(glued.points, glued.quads)["min_sj"] < 0.05
+
+
+@pytest.mark.parametrize("side", ["up", "right"])
+def test_a_concave_corner_the_map_folds_shut_is_named(side):
+    """The map can fold at a concave corner with none of the corner's own triangles
+    inverted: its boundary runs backwards next to the corner, so the map turns 1 quarter
+    there where the domain turns 3 (gmsh_full_quad at 400 quads, issue 37: a 60° rotated
+    hole's corner). The tracer then takes the corner as convex and starts no trace from
+    it: a face with a corner of 3 quarter turns, or one turning past the outside. The
+    refusal names the corner and both counts (the old one gave only the face)."""
+    x, cells = l_shape(6)
+    mesh = cut.cut_mesh(x, cells, constant_field(x))
+    param = seamless.integrate(mesh, 3.3)
+    corner = int(np.flatnonzero(np.all(np.isclose(x, [1.0, 1.0]), axis=1))[0])
+    (at_corner,) = np.unique(mesh.corners[mesh.cells == corner])
+    beside = [1.0, 1 + 1 / 6] if side == "up" else [1 + 1 / 6, 1.0]
+    v = int(np.flatnonzero(np.all(np.isclose(x, beside), axis=1))[0])
+    (w,) = np.unique(mesh.corners[mesh.cells == v])
+    step = param.uv[w] - param.uv[at_corner]
+    c = int(np.argmax(np.abs(step)))  # the coordinate that runs along this side
+    uv = param.uv.copy()
+    uv[w, c] = param.uv[at_corner, c] - 0.3 * np.sign(step[c])  # behind the corner
+    folded = seamless.parametrisation(mesh, uv, 3.3)
+    assert seamless.wrong_corners(param) == []
+    assert (corner, 1, 3) in seamless.wrong_corners(folded)
+    with pytest.raises(charts.LayoutError,
+                       match=r"the map turns 1 quarter turn where the domain turns 3 at the "
+                             r"boundary vertex \(1, 1\)"):
+        layout.layout(folded)

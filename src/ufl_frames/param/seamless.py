@@ -35,11 +35,11 @@ import scipy.sparse.linalg as spla
 from ufl_frames.param.cut import CutMesh, triangle_components
 
 __all__ = ["Parametrisation", "SeamlessSystem", "angle_sums", "boundary_coordinates",
-           "curve_edge_ids", "elimination", "factorise", "first_wedges", "folded",
+           "boundary_steps", "curve_edge_ids", "elimination", "factorise", "first_wedges", "folded",
            "gradients", "integrate", "interior_curve_coordinates", "invalid",
            "least_squares_system", "miswound", "parametrisation", "quarter_turn",
            "scale_for_quad_count", "scale_for_quad_size", "targets", "wedge_of",
-           "weighted_solve"]
+           "weighted_solve", "wrong_corners"]
 
 
 def gradients(x: np.ndarray, cells: np.ndarray):
@@ -394,6 +394,61 @@ def invalid(p: Parametrisation) -> np.ndarray:
     return folded(p) | miswound(p)[p.mesh.cells].any(axis=1)
 
 
+def wrong_corners(p: Parametrisation) -> list:
+    """(vertex, the map's quarter turns, the domain's) of every boundary vertex around
+    which the map's corner angles add up to three eighths of a turn or more away from the
+    domain's (:func:`angle_sums`): the map folds there though none of its triangles need
+    be inverted (its boundary runs backwards next to the vertex: a 270° corner the map
+    turns by 90°). A corner under 45° counted as one quarter turn is less than a quarter
+    turn away."""
+    mesh = p.mesh
+    n = mesh.x.shape[0]
+    boundary = np.unique(mesh.edges[mesh.faces[:, 1] < 0])
+    domain = angle_sums(mesh.cells, mesh.x[mesh.cells], n)[boundary]
+    mapped = angle_sums(mesh.cells, p.corner_values(), n)[boundary]
+    off = np.flatnonzero(np.abs(mapped - domain) >= 0.75 * np.pi)
+    quarter = np.pi / 2
+    return [(int(boundary[i]), int(np.rint(mapped[i] / quarter)),
+             int(np.rint(domain[i] / quarter))) for i in off]
+
+
+#: Boundary edges on either side of a wrong corner (:func:`wrong_corners`) whose step
+#: along the boundary :meth:`SeamlessSystem.open_corners` holds to the field's, and the
+#: rounds it tries.
+CORNER_EDGES, CORNER_ROUNDS = 3, 3
+
+
+def boundary_steps(p: Parametrisation, vertices, reach: int = CORNER_EDGES):
+    """The boundary edges within ``reach`` edges of ``vertices`` along the boundary, as
+    rows (wedge value index at the edge's end, at its start, the field's step): the
+    coordinate that runs along the edge (the one :func:`boundary_coordinates` does not
+    hold) advances as the target gradient of the edge's triangle integrated along it."""
+    mesh = p.mesh
+    boundary, constant = boundary_coordinates(mesh)
+    touching: dict[int, list] = {}
+    for e, c in zip(boundary.tolist(), constant.tolist(), strict=True):
+        for v in mesh.edges[e].tolist():
+            touching.setdefault(v, []).append((e, c))
+    chosen, frontier = {}, set(vertices)
+    for _ in range(reach):
+        reached = set()
+        for v in frontier:
+            for e, c in touching.get(v, ()):
+                if e not in chosen:
+                    chosen[e] = c
+                    reached.update(mesh.edges[e].tolist())
+        frontier = reached
+    rows = []
+    for e, c in sorted(chosen.items()):
+        f = int(mesh.faces[e, 0])
+        a, b = (int(v) for v in mesh.edges[e])
+        free = 1 - c
+        target = (p.target_u if free == 0 else p.target_v)[f]
+        rows.append((2 * wedge_of(mesh, f, b) + free, 2 * wedge_of(mesh, f, a) + free,
+                     float(target @ (mesh.x[b] - mesh.x[a]))))
+    return rows
+
+
 
 
 def factorise(N) -> spla.SuperLU:
@@ -533,6 +588,33 @@ class SeamlessSystem:
             p = self.param(self.solve(F, G, d, weight))
         return p
 
+    def open_corners(self, p: Parametrisation) -> Parametrisation:
+        """The map ``p`` (of :meth:`unfold`, with no fixed functionals) where it folds at
+        boundary vertices (:func:`wrong_corners`): the boundary's steps next to them held
+        to the field's (:func:`boundary_steps`) and unfolded again, the vertices of every
+        round kept, while that leaves fewer such vertices (at most
+        :data:`CORNER_ROUNDS`). The least squares of a field that is not integrable can
+        fold a concave corner shut with no triangle inverted — around a small rotated hole
+        of gmsh_full_quad the boundary ran backwards next to its corners — and the traces
+        then take the corner as convex; the field's steps along the boundary open it."""
+        wrong = wrong_corners(p)
+        held: set = set()
+        for _ in range(CORNER_ROUNDS):
+            if not wrong:
+                break
+            held |= {v for v, _, _ in wrong}
+            rows = boundary_steps(p, held)
+            T = self.T.tocsr()
+            F = sp.csr_matrix(sp.vstack([T[i] - T[j] for i, j, _ in rows]))
+            d = np.array([step for _, _, step in rows])
+            G = F @ self.lu.solve(F.T.toarray())
+            candidate = self.unfold(F, G, d)
+            left = wrong_corners(candidate)
+            if len(left) >= len(wrong):
+                break
+            p, wrong = candidate, left
+        return p
+
     def influence(self, F, G, triangles: np.ndarray) -> np.ndarray:
         """Per fixed functional (rows of F) how much the wedge values of ``triangles``
         move per unit of its integer: Σ |∂x/∂d| over their corners' coordinates.
@@ -567,7 +649,8 @@ def integrate(mesh: CutMesh, scale: float = 1.0, anchor=None,
               unfold_folds: bool = True) -> Parametrisation:
     """The seamless least-squares map of ``mesh``'s combed field at scale ``scale``, zero
     at the ``anchor`` wedges (:func:`least_squares_system`); with ``unfold_folds``,
-    folded triangles re-weighted (:meth:`SeamlessSystem.unfold`).
+    folded triangles re-weighted (:meth:`SeamlessSystem.unfold`) and concave corners
+    folded shut opened (:meth:`SeamlessSystem.open_corners`).
 
     Args:
         mesh: the cut mesh with its combed field.
@@ -580,4 +663,6 @@ def integrate(mesh: CutMesh, scale: float = 1.0, anchor=None,
         The :class:`Parametrisation` (not integer: no rounding here).
     """
     system = SeamlessSystem(mesh, scale, anchor)
-    return system.unfold() if unfold_folds else system.param(system.y0)
+    if not unfold_folds:
+        return system.param(system.y0)
+    return system.open_corners(system.unfold())

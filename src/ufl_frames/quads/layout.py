@@ -38,6 +38,7 @@ from ufl_frames.param.seamless import (
     curve_edge_ids,
     parametrisation,
     quarter_turn,
+    wrong_corners,
 )
 from ufl_frames.quads.charts import UNIT, LayoutError
 from ufl_frames.quads.motorcycles import QUARTER, Motorcycles, rot
@@ -203,10 +204,21 @@ def layout(param: Parametrisation, motorcycles: Motorcycles | None = None) -> La
         ends, total = _node_ends(mc, arcs, nodes)
         patches = _faces(arcs, ends, total)
     except LayoutError as e:
-        if not mc.folded.any():
+        wrong = wrong_corners(param)
+        if not mc.folded.any() and not wrong:
             raise
-        raise LayoutError(f"{e} (the seamless map folds on {int(mc.folded.sum())} "
-                          "triangles)") from e
+        why = []
+        if wrong:
+            x = param.mesh.x
+            why.append("the map turns " + "; ".join(
+                f"{q} quarter turn{'' if abs(q) == 1 else 's'} where the domain turns {k} "
+                f"at the boundary vertex "
+                f"({x[v, 0]:.4g}, {x[v, 1]:.4g})" for v, q, k in wrong[:3])
+                + (f" (and at {len(wrong) - 3} more)" if len(wrong) > 3 else "")
+                + ": it folds there, and a concave corner it takes as convex starts no trace")
+        if mc.folded.any():
+            why.append(f"the seamless map folds on {int(mc.folded.sum())} triangles")
+        raise LayoutError(f"{e} ({'; '.join(why)})") from e
     return Layout(arcs=arcs, nodes=nodes, patches=patches, traces=traces, motorcycles=mc,
                   folded=np.flatnonzero(mc.folded))
 
