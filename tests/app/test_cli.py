@@ -310,6 +310,17 @@ def test_default_output_folder():
 
 
 @pytest.mark.serial
+def test_python_m_ufl_frames_is_the_command(tmp_path):
+    """``python -m ufl_frames`` runs the ``ufl-frames`` command, as ``python -m ufl_frames.app``."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.run([sys.executable, "-m", "ufl_frames", "--help"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120, env=env, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == run_cli("--help", cwd=tmp_path).stdout
+    assert "solve" in proc.stdout
+
+
+@pytest.mark.serial
 @pytest.mark.parametrize(
     "args",
     [
