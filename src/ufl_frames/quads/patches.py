@@ -14,10 +14,13 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    where the quads left there would not make a valid fan (:meth:`_Points.valid_fan`: the
    domain's angle there shared by the quads, each within :data:`FAN_ANGLES`), the arcs
    collapsed there get at least 1 and the program is solved again (until none does).
-   Interior curves' arcs keep a length; an arc at a model point may collapse (a trace
-   passing a fraction of a quad from a corner, the airfoil's trailing edge say, goes
-   through it), the model point staying where it is, but not so as to glue it to another
-   model or curve point or to another boundary point (:meth:`_Points.bad_merges`). So
+   An arc at a model point may collapse (a trace passing a fraction of a quad from a
+   corner, the airfoil's trailing edge say, goes through it), the model point staying
+   where it is, but not so as to glue it to another model or curve point or to another
+   boundary point (:meth:`_Points.bad_merges`); an interior curve's arcs may collapse
+   too, gluing points along the curve (two traces from its two sides landing a hair apart,
+   or a hair from a model point on it, end at one point), but not two model points (the
+   longest zero arc between them gets 1). So
    a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
    goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
    its separatrices and the boundary collapse: no sliver layer); a valence-3 one (turn
@@ -26,7 +29,9 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    With every arc at least 1 (``collapse_below=0``) a solution always exists: the real
    lengths solve the equalities, so the rational cone they span holds integer points;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
-   integer positions along each arc (uniform in the map), the inside by transfinite
+   integer positions along each arc (uniform in the map; an arc that is a side by itself
+   has its points across from the opposite side's, :func:`_facing_fractions`, so that a
+   thin patch is not sheared), the inside by transfinite
    (Coons) blending in the patch's rectangle of the parameter plane, and every point
    mapped back to the plane by walking the triangles of the map from the patch's corner
    (straight segments in the patch's chart, across seams). Arc points are computed once,
