@@ -638,11 +638,11 @@ def _facing_fractions(lay: Layout, n: np.ndarray) -> list:
     this one), not uniform; of the patches it is such a side of (a boundary arc has one, a
     trace or a curve two), the thinnest (the least length across, in the map) sets them,
     the thinnest patches first (so that a patch whose two sides are single arcs passes on
-    the points its thinner neighbour gave one of them). A thin patch (one quad across an air gap
-    between the boundary and an interface, or between an interface and a trace passing
-    close to it) whose other side is split unevenly (the interface's model points, the
-    ends of traces from the other side) would otherwise have its quads sheared by up to a
-    quad's length across their thickness."""
+    the points its thinner neighbour gave one of them). A thin patch (one quad across an
+    air gap between the boundary and an interface, or between an interface and a trace
+    passing close to it) whose other side is split unevenly (the interface's model points,
+    the ends of traces from the other side) would otherwise have its quads sheared by up to
+    a quad's length across their thickness."""
     fractions: list = [None] * len(lay.arcs)
     candidates = []
     for p, sides in enumerate(lay.patches):
