@@ -14,10 +14,13 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    where the quads left there would not make a valid fan (:meth:`_Points.valid_fan`: the
    domain's angle there shared by the quads, each within :data:`FAN_ANGLES`), the arcs
    collapsed there get at least 1 and the program is solved again (until none does).
-   Interior curves' arcs keep a length; an arc at a model point may collapse (a trace
-   passing a fraction of a quad from a corner, the airfoil's trailing edge say, goes
-   through it), the model point staying where it is, but not so as to glue it to another
-   model or curve point or to another boundary point (:meth:`_Points.bad_merges`). So
+   An arc at a model point may collapse (a trace passing a fraction of a quad from a
+   corner, the airfoil's trailing edge say, goes through it), the model point staying
+   where it is, but not so as to glue it to another model or curve point or to another
+   boundary point (:meth:`_Points.bad_merges`); an interior curve's arcs may collapse
+   too, gluing points along the curve (two traces from its two sides landing a hair apart,
+   or a hair from a model point on it, end at one point), but not two model points (the
+   longest zero arc between them gets 1). So
    a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
    goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
    its separatrices and the boundary collapse: no sliver layer); a valence-3 one (turn
@@ -34,7 +37,9 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    quads from the curve to wherever the program closes it. A small hole a few quads
    round would otherwise be a polygon of a few chords;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
-   integer positions along each arc (uniform in the map), the inside by transfinite
+   integer positions along each arc (uniform in the map; an arc that is a side by itself
+   has its points across from the opposite side's, :func:`_facing_fractions`, so that a
+   thin patch is not sheared), the inside by transfinite
    (Coons) blending in the patch's rectangle of the parameter plane, and every point
    mapped back to the plane by walking the triangles of the map from the patch's corner
    (straight segments in the patch's chart, across seams). Arc points are computed once,
@@ -186,9 +191,9 @@ def integer_lengths(lay: Layout, weights=None,
     """
     L = lay.lengths()
     w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
+    # an interior curve's arcs may collapse too (two trace ends on it a fraction of a
+    # quad apart become one); bad_merges keeps its model points and its pieces apart
     lower = np.where(L < collapse_below, 0.0, 1.0)
-    # the features' curves keep a length: a collapse would glue two of their points
-    lower[[a for a, arc in enumerate(lay.arcs) if arc.curve]] = 1.0
     need = min_curve_lengths(lay, CHORD_SAGITTA if sagitta is None else sagitta)
     lower = np.where(need >= 2, np.maximum(lower, need), lower)  # 1: as before (collapses)
     for _ in range(L.size + 1):
@@ -311,7 +316,21 @@ class _Points:
         # valence-5 singular vertex (turn −1: quads of 90° and 60° on the two sides), onto
         # it (the curve's point stays, :func:`patch_quads`), not two of its points
         # together, nor one onto the boundary or a valence-3 singular vertex (a quad with a
-        # 180° corner on one side)
+        # 180° corner on one side); but points joined along the curve by its zero arcs
+        # (trace ends a fraction of a quad apart, at most one model point) may be one
+        on_curve = list(range(self.count))  # union–find of the zero curve arcs alone
+
+        def follow(a):
+            while on_curve[a] != a:
+                on_curve[a] = on_curve[on_curve[a]]
+                a = on_curve[a]
+            return a
+
+        for arc, k in zip(self.lay.arcs, self.n.tolist(), strict=True):
+            if k == 0 and arc.curve:
+                on_curve[max(follow(arc.start), follow(arc.end))] = min(follow(arc.start),
+                                                                        follow(arc.end))
+        models = self.model_ids()
         special: dict = {}
         for i in self.curve_ids() | self.model_ids():
             special.setdefault(self.find(i), set()).add(i)
@@ -321,7 +340,12 @@ class _Points:
             ids = special.get(self.find(i))
             if ids is not None and i not in ids:
                 bad.add(self.find(i))
-        bad.update(root for root, ids in special.items() if len(ids) > 1)
+        bad.update(root for root, ids in special.items() if len(ids & models) > 1)
+        along: dict = {}  # model points glued along a curve by its zero arcs
+        for i in models:
+            along[follow(i)] = along.get(follow(i), 0) + 1
+        clash = {c for c, count in along.items() if count > 1}
+        bad.update(root for root, ids in special.items() if len({follow(i) for i in ids}) > 1)
         for runs in self.runs:  # a patch left with quads whose two corners are one point
             if len(runs[0]) > 1 and len(runs[1]) > 1:
                 for ids in runs:
@@ -340,9 +364,25 @@ class _Points:
                 elif root in seen:  # two singular vertices inside
                     bad.add(root)
                 seen.add(root)
-        return sorted({a for arcs, pairs in self.events
-                       if any(self.find(p) in bad for p, _ in pairs) for a in arcs}
-                      | set(self.lost))
+        blamed = {a for arcs, pairs in self.events
+                  if any(self.find(p) in bad for p, _ in pairs) for a in arcs}
+        # a zero curve arc glues two points along its curve, which is bad only where two
+        # model points become one along it, and then the longest zero arc between them is
+        # kept: the others keep length 0 (a whole quad between a trace end and a model
+        # point, or the end of a trace from the other side, it passes a fraction of a
+        # quad from, would fold the quads between them); the glues they are part of are
+        # undone by their other arcs
+        longest: dict = {}
+        for a, (arc, k) in enumerate(zip(self.lay.arcs, self.n.tolist(), strict=True)):
+            c = follow(arc.start)
+            if k == 0 and arc.curve and c in clash and (
+                    c not in longest or arc.length > self.lay.arcs[longest[c]].length):
+                longest[c] = a
+        innocent = {a for a, (arc, k) in enumerate(zip(self.lay.arcs, self.n.tolist(),
+                                                       strict=True))
+                    if k == 0 and arc.curve and a not in longest.values()}
+        kept = blamed - innocent
+        return sorted((kept if kept or self.lost else blamed) | set(self.lost))
 
     def quads_at(self) -> dict:
         """Per glued point (root) the number of quads of the kept patches at it: one at a
@@ -401,22 +441,25 @@ def _physical(mc, f, X):
     b = np.linalg.solve(T, np.asarray(X, dtype=float) - A[0])
     lam = np.array([1 - b.sum(), b[0], b[1]])
     return lam @ mc.mesh.x[mc.cells[f]]
-def _arc_points(mc, arc, n):
-    """The inner points of an arc at its lengths k/n, k = 1 … n − 1 (uniform in the map).
+def _arc_points(mc, arc, n, fractions=None):
+    """The inner points of an arc at its lengths k/n, k = 1 … n − 1 (uniform in the map),
+    or at the given ``fractions`` of its length.
 
     Args:
         mc: the tracer (charts).
         arc: the arc.
         n: its integer length.
+        fractions: n − 1 increasing numbers in (0, 1), or None (k/n).
 
     Returns:
         A list of n − 1 plane points.
     """
     lengths = [float(piece_length(p)) for p in arc.pieces]
     total = sum(lengths)
+    fractions = np.arange(1, n) / n if fractions is None else fractions
     out, j, at = [], 0, 0.0
     for k in range(1, n):
-        s = total * k / n
+        s = total * float(fractions[k - 1])
         while j < len(lengths) - 1 and at + lengths[j] < s:
             at += lengths[j]
             j += 1
@@ -532,8 +575,10 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
                              (arc.end, (arc.pieces[-1][0], arc.pieces[-1][2]))):
             if position[node] is None:
                 position[node] = _physical(mc, f, (float(X[0]), float(X[1])))
+    fractions = _facing_fractions(lay, n)
     for a, arc in enumerate(lay.arcs):
-        for i, p in zip(pts.arc_ids[a][1:-1], _arc_points(mc, arc, int(n[a])), strict=True):
+        for i, p in zip(pts.arc_ids[a][1:-1], _arc_points(mc, arc, int(n[a]), fractions[a]),
+                        strict=True):
             position[i] = p
     quads, lost = [], 0
     steps = 50 * int(math.sqrt(len(mc.cells))) + 1000  # a walk longer than this is lost
@@ -541,14 +586,7 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
         W, H = len(runs[0]) - 1, len(runs[1]) - 1
         if W == 0 or H == 0:
             continue
-        lengths = []
-        for side in sides:
-            pos = [0.0]
-            for h in side:
-                k = int(n[h // 2])
-                step = lay.arcs[h // 2].length / k if k else 0.0
-                pos += [pos[-1] + step * (j + 1) for j in range(k)]
-            lengths.append(np.array(pos))
+        lengths = [_side_positions(lay, n, side, fractions) for side in sides]
         Lw, Lh = lengths[0][-1], lengths[1][-1]
         bottom = np.stack([lengths[0], np.zeros(W + 1)], axis=1)
         right = np.stack([np.full(H + 1, Lw), lengths[1]], axis=1)
@@ -596,20 +634,22 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
                           "quad size")
     quads = np.concatenate(quads)
     # glued points: one point each, a corner's, else the boundary's (a singular vertex
-    # glued to the boundary goes there), else an interior curve's or model point's (a
-    # trace glued to an interface goes onto it), else the singular vertex's, else the mean
+    # glued to the boundary goes there), else a model point's, else an interior curve's
+    # (a trace glued to an interface goes onto it; trace ends glued along the curve, the
+    # mean of theirs), else the singular vertex's, else the mean
     total = len(position)
     root = np.array([pts.find(i) if i < pts.count else i for i in range(total)])
-    rank = np.full(total, 4)
-    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 3
-    rank[list(pts.curve_ids() | pts.model_ids())] = 2
+    rank = np.full(total, 5)
+    rank[[i for i, key in enumerate(lay.nodes) if key[0] == "v" and key[1] in mc.singular]] = 4
+    rank[list(pts.curve_ids())] = 3
+    rank[list(pts.model_ids())] = 2
     rank[list(pts.boundary_ids())] = 1
     rank[[i for i, key in enumerate(lay.nodes)
           if key[0] == "v" and mc.on_boundary[key[1]] and mc.quarters(key[1]) != 2]] = 0
     xy = np.array([np.asarray(p, dtype=float) for p in position])
     used, quads = np.unique(root[quads], return_inverse=True)
     quads = quads.reshape(-1, 4)
-    best = np.full(total, 5)
+    best = np.full(total, 6)
     np.minimum.at(best, root, rank)
     chosen = rank == best[root]
     sums = np.zeros((total, 2))
@@ -624,7 +664,7 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
     special[list(pts.curve_ids() | pts.model_ids())] = True
     pinned, fan = np.zeros(total, dtype=bool), np.zeros(total, dtype=bool)
     np.logical_or.at(pinned, root, special)
-    np.logical_or.at(fan, root, rank == 3)
+    np.logical_or.at(fan, root, rank == 4)
     free = (((best[used] == 1) & fan[used]) | ((best[used] <= 1) & (counts[used] > 1))) \
         & ~pinned[used]
     points = onto_boundary(points, quads, np.flatnonzero(free), mc.mesh.x, mc.mesh.cells)
@@ -634,6 +674,58 @@ def patch_quads(lay: Layout, n: np.ndarray) -> tuple[QuadMesh, int]:
     once = pairs[counts == 1]
     return QuadMesh(points=points, quads=quads, chains={},
                     boundary=np.stack([once // m, once % m], axis=1)), lost
+
+
+def _fractions(k: int, h: int, fractions) -> np.ndarray:
+    """The positions (fractions of its length, 0 and 1 included) of the k + 1 points of
+    half-arc h along its own direction: uniform, or ``fractions[h // 2]`` (of the arc)."""
+    inner = fractions[h // 2]
+    inner = np.arange(1, k) / k if inner is None else np.asarray(inner, dtype=float)
+    f = np.concatenate([[0.0], inner, [1.0]]) if k else np.zeros(1)
+    return f if h % 2 == 0 else (1.0 - f)[::-1]
+
+
+def _side_positions(lay: Layout, n: np.ndarray, side, fractions) -> np.ndarray:
+    """The map lengths from a patch side's start of its points (its arcs' points at
+    their :func:`_facing_fractions`, else uniform)."""
+    pos = [0.0]
+    for h in side:
+        k = int(n[h // 2])
+        at = pos[-1]
+        pos += (at + lay.arcs[h // 2].length * _fractions(k, h, fractions)[1:]).tolist()
+    return np.array(pos)
+
+
+def _facing_fractions(lay: Layout, n: np.ndarray) -> list:
+    """Per arc the fractions of its length where its inner points go, or None (uniform,
+    k/n). An arc that is a whole side of a patch by itself (but for zero arcs) has them
+    across from the opposite side's points (at their lengths along that side, scaled to
+    this one), not uniform; of the patches it is such a side of (a boundary arc has one, a
+    trace or a curve two), the thinnest (the least length across, in the map) sets them,
+    the thinnest patches first (so that a patch whose two sides are single arcs passes on
+    the points its thinner neighbour gave one of them). A thin patch (one quad across an
+    air gap between the boundary and an interface, or between an interface and a trace
+    passing close to it) whose other side is split unevenly (the interface's model points,
+    the ends of traces from the other side) would otherwise have its quads sheared by up to
+    a quad's length across their thickness."""
+    fractions: list = [None] * len(lay.arcs)
+    candidates = []
+    for p, sides in enumerate(lay.patches):
+        for s, side in enumerate(sides):
+            kept = [h for h in side if n[h // 2] > 0]  # zero arcs have no points
+            if len(kept) == 1 and n[kept[0] // 2] >= 2:
+                thickness = sum(lay.arcs[g // 2].length for g in sides[(s + 1) % 4])
+                candidates.append((thickness, p, s, kept[0]))
+    for _, p, s, h in sorted(candidates):
+        sides = lay.patches[p]
+        if fractions[h // 2] is not None:
+            continue
+        across = _side_positions(lay, n, sides[(s + 2) % 4], fractions)
+        if across[-1] <= 0:
+            continue
+        inner = (1.0 - across[::-1] / across[-1])[1:-1]  # along this side, from its start
+        fractions[h // 2] = inner if h % 2 == 0 else (1.0 - inner)[::-1]
+    return fractions
 
 
 def quads_of_map(param: Parametrisation,
