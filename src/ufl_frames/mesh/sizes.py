@@ -44,11 +44,9 @@ DEFAULT_SIZE_WEIGHT = 0.3
 #: which charges each singularity ∝ log(1/mesh size). 0: no such term. Without it the
 #: sized piano's minimisers grow ±1/4 pairs under refinement (38 singularities at 24 687
 #: triangles unpinned); with 0.1 they keep 2 (0.05: 4); benchmarks/README, "A smoothing
-#: term for the sized problem". Not the default yet: a 2-process solve resumed from its
-#: checkpoint with the term takes one Newton step more than the uninterrupted one (not
-#: diagnosed), so it is asked for with ``-frames_size_smoothing 0.1``.
+#: term for the sized problem". The default (``-frames_size_smoothing 0`` turns it off).
 SIZE_SMOOTHING = 0.1
-DEFAULT_SIZE_SMOOTHING = 0.0
+DEFAULT_SIZE_SMOOTHING = SIZE_SMOOTHING
 
 #: Triangle edges a quad edge of a sized mesh spans at least (see :func:`resolving_factor`).
 #: Measured on ``benchmarks/shapes/l_shape_graded.geo`` at 400 quads: about one (the

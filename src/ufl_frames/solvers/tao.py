@@ -62,7 +62,7 @@ gave no value, and ``setFromOptions`` comes last.
 import time
 from contextlib import ExitStack
 
-from ufl_frames.bootstrap import init_petsc, petsc_defaults
+from ufl_frames.bootstrap import init_petsc, options_scope, petsc_defaults
 
 init_petsc()
 
@@ -194,6 +194,19 @@ BOUNDED_OPTIONS = {
     "nls": {"tao_ls_type": "armijo"},
 }
 
+#: Options a resumed solve of a TAO type sets over the user's (only while its TAO is set
+#: up). ``nls`` starts with an "interpolation" of its trust radius (``-tao_nls_init_type``):
+#: up to five trial steps along -g, and the best of them taken as a first iterate where
+#: it lowers J. At a solve's start that is its gradient step numbered 1 (Krylov count 0);
+#: at a resumed iterate it is a step the interrupted solve never took, after which the
+#: iterates part (the sized piano with the smoothing term, resumed at Newton step 4 of
+#: 9: one step more, issue 39). ``nls`` solves its Newton systems with the KSP's radius
+#: at its maximum whatever the trust radius, so "constant" changes nothing else. A state
+#: of the start itself (iterate 0) resumes as the start did, with the interpolation.
+RESUMED_OPTIONS = {
+    "nls": {"tao_nls_init_type": "constant"},
+}
+
 #: Options prefix of the Newton KSP inside each Newton TAO type.
 NEWTON_KSP_PREFIX = {"nls": "tao_nls_", "ntr": "tao_ntr_", "bnls": "tao_bnk_",
                      "bntr": "tao_bnk_"}
@@ -283,8 +296,9 @@ def solve(
     history continues it, ``max_it`` counts from the original start, the relative
     gradient test keeps the original |g₀|, and the Newton model its damping and active
     set, so that the result is that of the solve that made the state (for ``nls`` and
-    ``bncg`` bit for bit as measured, mostly); what TAO keeps inside starts afresh: the
-    trust radius of ``nls``'s truncated CG, ``lmvm``'s L-BFGS memory.
+    ``bncg`` bit for bit as measured, mostly): ``nls`` resumes without the trial gradient
+    steps of its start (:data:`RESUMED_OPTIONS`). What TAO keeps inside starts afresh:
+    the trust radius of ``ntr``, ``lmvm``'s L-BFGS memory.
 
     Two defaults are relative to the scales of ``problem`` (given values are absolute):
 
@@ -615,7 +629,11 @@ class _TaoSolve:
             tao.setHessian(guarded(model.update), model.shell, pre)
         tao.setUpdate(guarded(update))
         tao.setMonitor(guarded(self.record))
-        tao.setFromOptions()
+        resumed = {}
+        if self.resume is not None and len(self.resume.history) > 1:  # past the start
+            resumed = RESUMED_OPTIONS.get(self.tao_type, {})
+        with options_scope([(self.options_prefix + k, v) for k, v in resumed.items()]):
+            tao.setFromOptions()
         if model is not None:
             # The Newton KSP's ReducedFactorPC (the default PC), whenever PETSc makes it,
             # takes this model; any other PC acts on the model's pre-matrix as it is.
