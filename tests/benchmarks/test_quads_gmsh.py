@@ -15,7 +15,7 @@ pytestmark = pytest.mark.serial  # subprocesses of Gmsh: nothing here is paralle
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "quads.py"
 
-TWO_BOXES = """Function Slab
+TWO_SLABS = """Function Slab
   p1 = newp; Point(p1) = {x0, 0, 0, lc};
   p2 = newp; Point(p2) = {x0 + w, 0, 0, lc};
   p3 = newp; Point(p3) = {x0 + w, 1, 0, lc};
@@ -46,16 +46,16 @@ def quads_script():
 
 def test_a_geo_with_a_function_is_meshed_at_the_count_asked(quads_script, tmp_path):
     """Every size tried parses the file again: in one process the second parse was a
-    redefinition of ``Slab`` (and a crash), and the file's point sizes (0.04, some 1 500
+    redefinition of ``Slab`` (and a crash), and the file's point sizes (0.04: 1 664
     quads) did not follow the size cap: the count stayed where the file put it."""
-    geo = tmp_path / "two_boxes.geo"
-    geo.write_text(TWO_BOXES)
+    geo = tmp_path / "two_slabs.geo"
+    geo.write_text(TWO_SLABS)
     args = argparse.Namespace(quads=300.0, quad_size=None, out=tmp_path / "out",
                               area_rtol=0.005, gmsh_timeout=120.0)
-    row = quads_script.run_gmsh(geo, "fullquad", args, "two_boxes")
+    row = quads_script.run_gmsh(geo, "fullquad", args, "two_slabs")
     assert row["status"] == "ok", row.get("error")
     assert row["area_exact"] == pytest.approx(2.5, rel=1e-9)
     assert row["valid"], row["problems"]
     # Gmsh's count moves in steps here (336 at two sizes 6 % apart): near, not within 10 %
     assert abs(row["quality"]["quads"] / 300.0 - 1) <= 0.25
-    assert (tmp_path / "out" / "two_boxes.msh").exists()
+    assert (tmp_path / "out" / "two_slabs.msh").exists()
