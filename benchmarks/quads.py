@@ -32,12 +32,14 @@ Methods (``--methods``, default all but ``simple`` and ``delaunay``):
 
 Size: the target is ``--quads`` quads (default 400), or area / S² with ``--quad-size S``;
 ufl_frames gets ``--quad-size`` S = √(area / target). Gmsh meshes with
-``Mesh.MeshSizeMax`` = h from a first guess per method, then h is rescaled by
-√(quads / target) (the count goes as 1/h²) at most twice, until within 10 %. The Gmsh
+``Mesh.MeshSizeMax`` = h from a first guess per method (``Mesh.MeshSizeFactor`` 1), then h
+and the factor are rescaled together by √(quads / target) (the count goes as 1/h²; the
+factor for files whose own point sizes are below h) at most twice, until within 10 %. The Gmsh
 runs use the project's loader settings for curves (at least 12 points per full circle, 8
-per other curve; ``ufl_frames.mesh``). Every Gmsh run is a subprocess of this script
-(``--gmsh-timeout``, default 300 s: algorithm 11 can hang); the time reported is that of
-``gmsh.model.mesh.generate(2)`` at the final size.
+per other curve; ``ufl_frames.mesh``). Every Gmsh parse of the file (the area, then each
+size) is a subprocess of this script, since Gmsh keeps a ``.geo``'s ``Function``s for the
+life of its process (``--gmsh-timeout``, default 300 s for them all: algorithm 11 can
+hang); the time reported is that of ``gmsh.model.mesh.generate(2)`` at the final size.
 
 Measures: :func:`~ufl_frames.quads.measures.quad_quality` (irregular vertices, scaled
 Jacobian, edge ratio) and :func:`~ufl_frames.quads.measures.check_quad_mesh` (valid:
@@ -166,71 +168,57 @@ def _count_quads() -> tuple[int, int]:
     return counts[3], counts[2]
 
 
-def gmsh_run(path: Path, method: str, quads: float, quad_size: float | None,
-             out: Path | None, stem: str, area_rtol: float) -> dict:
-    """Gmsh's quads of ``path`` with ``method`` at about ``quads`` quads (area /
-    ``quad_size``² if given), measured."""
+def gmsh_area(path: Path) -> float:
+    """The exact area of ``path``'s surfaces (:func:`_cad_area`): one parse of the file."""
+    import gmsh
+
+    gmsh.initialize(argv=[], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        _merge(path)
+        return _cad_area()
+    finally:
+        gmsh.finalize()
+
+
+def gmsh_try(path: Path, method: str, h: float, factor: float, area: float,
+             area_rtol: float, out: Path | None, stem: str) -> dict:
+    """Gmsh's quads of ``path`` with ``method`` at ``Mesh.MeshSizeMax`` = ``h`` and
+    ``Mesh.MeshSizeFactor`` = ``factor``, measured (picture and ``.msh`` in ``out`` if
+    given): one parse of the file, in a fresh model."""
     import gmsh
 
     from ufl_frames.quads.measures import check_quad_mesh, quad_quality
     from ufl_frames.quads.msh import plot_quads
 
-    options, guess = GMSH_METHODS[method]
+    options, _ = GMSH_METHODS[method]
     gmsh.initialize(argv=[], readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         _merge(path)
-        area = _cad_area()
-        target = area / quad_size**2 if quad_size else quads
-
-        def generate(h):  # in a fresh model: algorithm 11 keeps its sizes between calls
-            gmsh.clear()
-            _merge(path)
-            for key, value in {**CURVE_OPTIONS, **options, "Mesh.SubdivisionAlgorithm": 0,
-                               "Mesh.ElementOrder": 1, "Mesh.MeshSizeMax": h}.items():
-                gmsh.option.setNumber(key, value)
-            gmsh.logger.start()
-            start = time.perf_counter()
-            try:
-                gmsh.model.mesh.generate(2)  # errors are logged (General.AbortOnError 0)
-                seconds = time.perf_counter() - start
-                errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
-            finally:
-                gmsh.logger.stop()
-            if errors:
-                return {"mesh_size": h, "error": one_line(errors[0]).removeprefix("Error: ")}
-            quads, triangles = _count_quads()
-            return {"mesh_size": h, "quads": quads, "triangles": triangles, "seconds": seconds}
-
-        # Rescale until within WITHIN of the target; a size Gmsh fails at is nudged by 5 %
-        # (the full-quad Blossom needs an even number of boundary edges per loop).
-        tries = [generate(guess * math.sqrt(area / target))]
-        while len(tries) <= RESCALES + 2:
-            last = tries[-1]
-            if "error" in last:
-                tries.append(generate(last["mesh_size"] * 1.05))
-            elif last["quads"] and abs(last["quads"] / target - 1) > WITHIN:
-                tries.append(generate(last["mesh_size"] * math.sqrt(last["quads"] / target)))
-            else:
-                break
-            if sum("error" not in t for t in tries) > RESCALES:
-                break
-        done = [t for t in tries if "error" not in t]
-        if not done:
-            sizes = ", ".join(f"{t['mesh_size']:.3g}" for t in tries)
-            raise RuntimeError(f"Gmsh failed at sizes {sizes}: {tries[0]['error']}")
-        best = min(done, key=lambda t: abs(math.log(max(t["quads"], 1) / target)))
-        final = best if best is tries[-1] else generate(best["mesh_size"])
-        h, seconds = final["mesh_size"], final["seconds"]
+        for key, value in {**CURVE_OPTIONS, **options, "Mesh.SubdivisionAlgorithm": 0,
+                           "Mesh.ElementOrder": 1, "Mesh.MeshSizeMax": h,
+                           "Mesh.MeshSizeFactor": factor}.items():
+            gmsh.option.setNumber(key, value)
+        gmsh.logger.start()
+        start = time.perf_counter()
+        try:
+            gmsh.model.mesh.generate(2)  # errors are logged (General.AbortOnError 0)
+            seconds = time.perf_counter() - start
+            errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
+        finally:
+            gmsh.logger.stop()
+        if errors:
+            return {"mesh_size": h, "size_factor": factor,
+                    "error": one_line(errors[0]).removeprefix("Error: ")}
+        quads, triangles = _count_quads()
+        row = {"mesh_size": h, "size_factor": factor, "quads": quads, "triangles": triangles,
+               "seconds": seconds}
         x, q, t = _mesh_arrays()
         used, q = np.unique(q, return_inverse=True)  # the quads' points only
         x, q = x[used], q.reshape(-1, 4)
-        total = sum(t.get("seconds", 0) for t in tries) + (0 if final is best else final["seconds"])
-        row = {"method": method, "status": "ok", "target": target, "mesh_size": h,
-               "seconds": seconds, "total_s": total, "tries": tries, "area_exact": area,
-               "triangles": int(len(t))}
         if len(q) == 0:
-            return {**row, "status": "failed", "error": "no quads"}
+            return row
         problems = check_quad_mesh(x, q, area=area, rtol=area_rtol)
         if len(t):
             problems.insert(0, f"{len(t)} triangles left")
@@ -249,6 +237,90 @@ def gmsh_run(path: Path, method: str, quads: float, quad_size: float | None,
         gmsh.finalize()
 
 
+def _worker(cmd: list[str], deadline: float) -> dict:
+    """A ``--worker`` subprocess of this script, until ``deadline`` (``time.monotonic``):
+    its one JSON line; its failure raised."""
+    left = deadline - time.monotonic()
+    rc, out, err, _ = _run([sys.executable, str(Path(__file__).resolve()), "--worker", *cmd],
+                           max(left, 1.0)) if left > 0 else (None, "", "", 0.0)
+    if rc is None:
+        raise TimeoutError("Gmsh ran over its time")
+    try:
+        row = json.loads(out.strip().splitlines()[-1])
+    except (json.JSONDecodeError, IndexError):
+        raise RuntimeError(last_line(err) or f"exit status {rc}") from None
+    if "failed" in row:
+        raise RuntimeError(row["failed"])
+    return row
+
+
+def gmsh_run(path: Path, method: str, quads: float, quad_size: float | None,
+             out: Path | None, stem: str, area_rtol: float, timeout: float = 300.0) -> dict:
+    """Gmsh's quads of ``path`` with ``method`` at about ``quads`` quads (area /
+    ``quad_size``² if given), measured.
+
+    Every parse of the file is in its own subprocess (:func:`gmsh_area`, then
+    :func:`gmsh_try` per size): Gmsh's parser keeps a ``.geo``'s ``Function``s for the
+    life of the process (``gmsh.clear`` and ``gmsh.finalize`` do not forget them), so a
+    second parse of such a file in one process is a redefinition, and its ``Call`` then
+    reads a closed file. Raises :class:`TimeoutError` past ``timeout`` seconds in all.
+    """
+    deadline = time.monotonic() + timeout
+    area = _worker([str(path), method, "--area-only"], deadline)["area"]
+    target = area / quad_size**2 if quad_size else quads
+    guess = GMSH_METHODS[method][1]
+    with tempfile.TemporaryDirectory(prefix="quads_gmsh_") as tmp:
+        def generate(h, factor):  # a fresh process: algorithm 11 keeps its sizes
+            folder = Path(tmp) / str(len(tries))
+            cmd = [str(path), method, "--at", repr(h), "--factor", repr(factor),
+                   "--area", repr(area),
+                   "--area-rtol", repr(area_rtol), "--stem", stem]
+            if out is not None:  # the try's picture and .msh; the best one's are kept
+                cmd += ["--out", str(folder)]
+            return {**_worker(cmd, deadline), "folder": str(folder)}
+
+        # Rescale until within WITHIN of the target; a size Gmsh fails at is nudged by 5 %
+        # (the full-quad Blossom needs an even number of boundary edges per loop). The cap
+        # and the factor of the file's own sizes are scaled together, so the size field
+        # min(factor * file's size, cap) is scaled as a whole, whichever of them binds.
+        tries = []
+        tries.append(generate(guess * math.sqrt(area / target), 1.0))
+        while len(tries) <= RESCALES + 2:
+            last = tries[-1]
+            h, factor = last["mesh_size"], last["size_factor"]
+            if "error" in last:
+                tries.append(generate(h * 1.05, factor * 1.05))
+            elif last["quads"] and abs(last["quads"] / target - 1) > WITHIN:
+                scale = math.sqrt(last["quads"] / target)
+                tries.append(generate(h * scale, factor * scale))
+            else:
+                break
+            if sum("error" not in t for t in tries) > RESCALES:
+                break
+        done = [t for t in tries if "error" not in t]
+        if not done:
+            sizes = ", ".join(f"{t['mesh_size']:.3g}" for t in tries)
+            raise RuntimeError(f"Gmsh failed at sizes {sizes}: {tries[0]['error']}")
+        best = min(done, key=lambda t: abs(math.log(max(t["quads"], 1) / target)))
+        row = {"method": method, "status": "ok", "target": target,
+               "mesh_size": best["mesh_size"], "size_factor": best["size_factor"],
+               "seconds": best["seconds"],
+               "total_s": sum(t.get("seconds", 0) for t in tries),
+               "tries": [{k: t[k] for k in ("mesh_size", "size_factor", "quads", "triangles",
+                                            "seconds", "error") if k in t} for t in tries],
+               "area_exact": area, "triangles": best["triangles"]}
+        if "quality" not in best:
+            return {**row, "status": "failed", "error": "no quads"}
+        row.update({k: best[k] for k in ("quality", "valid", "problems", "area_error")})
+        if out is not None:  # the best try's files
+            out.mkdir(parents=True, exist_ok=True)
+            for ending in (".msh", ".png"):
+                shutil.copyfile(Path(best["folder"]) / f"{stem}{ending}",
+                                out / f"{stem}{ending}")
+            row["picture"] = str(out / f"{stem}.png")
+        return row
+
+
 # --- the subprocesses -------------------------------------------------------------------
 
 
@@ -265,24 +337,17 @@ def _run(cmd: list[str], timeout: float) -> tuple[int | None, str, str, float]:
 
 
 def run_gmsh(path: Path, method: str, args, stem: str, quads: float | None = None) -> dict:
-    """:func:`gmsh_run` in a subprocess (``quads`` overrides the size asked for)."""
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", str(path), method,
-           "--area-rtol", repr(args.area_rtol), "--stem", stem]
-    if args.quad_size and quads is None:
-        cmd += ["--quad-size", repr(args.quad_size)]
-    else:
-        cmd += ["--quads", repr(quads or args.quads)]
-    if args.out:
-        cmd += ["--out", str(args.out)]
-    rc, out, err, wall = _run(cmd, args.gmsh_timeout)
-    if rc is None:
+    """:func:`gmsh_run` within ``--gmsh-timeout`` (``quads`` overrides the size asked for);
+    its failure a row."""
+    quad_size = args.quad_size if quads is None else None
+    try:
+        return gmsh_run(path, method, quads or args.quads, quad_size, args.out, stem,
+                        args.area_rtol, timeout=args.gmsh_timeout)
+    except TimeoutError:
         return {"method": method, "status": "timeout",
                 "error": f"Gmsh ran over {args.gmsh_timeout:g} s"}
-    try:
-        return json.loads(out.strip().splitlines()[-1])
-    except (json.JSONDecodeError, IndexError):
-        return {"method": method, "status": "failed",
-                "error": last_line(err) or f"exit status {rc}"}
+    except RuntimeError as e:
+        return {"method": method, "status": "failed", "error": one_line(e)}
 
 
 def _msh_quads(path: Path):
@@ -511,16 +576,23 @@ def main() -> None:
     parser.add_argument("--worker", nargs=2, metavar=("FILE", "METHOD"),
                         help=argparse.SUPPRESS)
     parser.add_argument("--stem", help=argparse.SUPPRESS)
+    parser.add_argument("--area-only", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--at", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--factor", type=float, default=1.0, help=argparse.SUPPRESS)
+    parser.add_argument("--area", type=float, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.no_out:
         args.out = None
-    if args.worker:  # internal: one JSON line on stdout
-        path, method = args.worker
+    if args.worker:  # internal: one parse of the file, one JSON line on stdout
+        path, method = Path(args.worker[0]), args.worker[1]
         try:
-            row = gmsh_run(Path(path), method, args.quads, args.quad_size, args.out,
-                           args.stem, args.area_rtol)
+            if args.area_only:
+                row = {"area": gmsh_area(path)}
+            else:
+                row = gmsh_try(path, method, args.at, args.factor, args.area,
+                               args.area_rtol, args.out, args.stem)
         except Exception as e:  # reported, not raised
-            row = {"method": method, "status": "failed", "error": one_line(e)}
+            row = {"failed": one_line(e)}
         print(json.dumps(row))
         return
 
@@ -539,9 +611,11 @@ def main() -> None:
             print(format_row(rows[-1]), flush=True)
         for method in [m for m in args.methods if m in UFL_FRAMES_METHODS]:
             if area is None:  # no Gmsh run: ask one for the area only
-                probe = run_gmsh(path, "blossom", argparse.Namespace(
-                    **{**vars(args), "out": None}), f"{name}_probe", quads=50.0)
-                area = probe.get("area_exact")
+                try:
+                    area = _worker([str(path), "blossom", "--area-only"],
+                                   time.monotonic() + args.gmsh_timeout)["area"]
+                except (TimeoutError, RuntimeError):
+                    area = None
             if area is None:
                 rows.append({"method": method, "status": "not available",
                              "error": "the shape's area is unknown (Gmsh could not load it)"})

@@ -659,7 +659,7 @@ def size_target(config: RunConfig, comm):
         error = None
         if comm.rank == 0:
             try:
-                samples = read_file_sizes(config.geometry)
+                samples = read_file_sizes(config.geometry, config.mesh_time_limit)
             except Exception as e:  # a file Gmsh meshed already: should not happen
                 error = f"reading the sizes of {config.geometry}: {e}"
         samples, error = comm.bcast((samples, error), root=0)

@@ -407,12 +407,30 @@ def file_size_samples() -> np.ndarray | None:
     return samples if len(samples) else None
 
 
-def read_file_sizes(path: str) -> np.ndarray | None:
+def read_file_sizes(path: str, time_limit: float | None = None) -> np.ndarray | None:
     """:func:`file_size_samples` of the geometry file ``path``, opened in Gmsh for that
-    alone (the current process; Gmsh initialised here if it is not): None where the file
-    sets no sizes. Rank 0's work."""
+    alone: None where the file sets no sizes. Rank 0's work.
+
+    Gmsh runs in a forked child process stopped after ``time_limit`` seconds (None: the
+    loader's default, :func:`~ufl_frames.mesh.files.mesh_time_limit`; ``math.inf``: in
+    this process, Gmsh initialised here if it is not), as the loader's meshing does: Gmsh's
+    parser keeps a ``.geo``'s ``Function`` definitions for the life of the process
+    (``gmsh.clear`` and ``gmsh.finalize`` do not forget them), so a parse here would make
+    every later parse of the file, in this process or a child forked from it, a
+    redefinition that crashes Gmsh."""
     from ufl_frames.gmsh_scratch import scratch_model
 
-    with scratch_model("ufl_frames_sizes") as gmsh:
-        gmsh.open(str(path))
-        return file_size_samples()
+    def work():
+        with scratch_model("ufl_frames_sizes") as gmsh:
+            gmsh.open(str(path))
+            return file_size_samples()
+
+    if time_limit is None:
+        from ufl_frames.mesh.files import mesh_time_limit
+
+        time_limit = mesh_time_limit()
+    if not math.isfinite(time_limit):
+        return work()
+    from ufl_frames.mesh.distribute import _in_child
+
+    return _in_child(work, str(path), time_limit)
