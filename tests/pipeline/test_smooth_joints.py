@@ -5,13 +5,21 @@ Truth: a unit square of 2 × 2 cells cut into triangles, its bottom side made of
 collinear curves that meet at (0.5, 0), a 90° corner at each of the four corners. The
 point between the collinear curves is a joint (straight there, 180°); the corners are not;
 nor is the point where the curves belong to different physical groups, or where it is a
-physical point itself.
+physical point itself. And a fan of triangles round a boundary point where two curves meet
+at a known angle: a joint only where the boundary turns by less than SMOOTH_TURN (25°), so
+not at 135° or 225° (which the field rounds to two quarter turns, straight; deal.II
+step-49's notch corners, cut off by a quad edge); where the CAD's corners are given, their
+angle counts, not the triangles' (a circle's end point on coarse chords). The same fan's
+point is a tie corner (with_tie_corners: no cross fits both curves) at 135° and 225° only.
 """
 
-import numpy as np
+import math
 
-from ufl_frames.mesh.domain import PhysicalGroup
-from ufl_frames.param.features import Features, with_smooth_joints
+import numpy as np
+import pytest
+
+from ufl_frames.mesh.domain import Corner, PhysicalGroup
+from ufl_frames.param.features import Features, with_smooth_joints, with_tie_corners
 
 
 def _square():
@@ -49,3 +57,51 @@ def test_named_points_and_curves_of_other_groups_stay_quad_vertices():
     assert with_smooth_joints(features, x, cells, same).joints.tolist() == [1]
     named = (PhysicalGroup(0, 9, "probe", (11,)),)
     assert with_smooth_joints(features, x, cells, named).joints.size == 0
+
+
+def _fan(degrees):
+    """Triangles round node 0 on the boundary, filling the domain's angle ``degrees`` there
+    (rim nodes 1…5 at radius 1); curve 1 from node 0 along +x, curve 2 back to node 0 along
+    the last ray, curve 3 the rim; model points at node 0 and the curves' rim ends."""
+    rays = np.radians(np.linspace(0.0, degrees, 5))
+    x = np.vstack([[0.0, 0.0], np.c_[np.cos(rays), np.sin(rays)]])
+    cells = np.array([[0, i, i + 1] for i in range(1, 5)])
+    edges = [[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 0]]
+    features = Features(cell_region=np.zeros(4, dtype=np.int64), curve_edges=np.array(edges),
+                        edge_curve=np.array([1, 3, 3, 3, 3, 2]),
+                        point_nodes=np.array([0, 1, 5]), point_tag=np.array([10, 11, 12]))
+    return x, cells, features
+
+
+@pytest.mark.parametrize("degrees, joint", [(180, True), (160, True), (204, True),
+                                            (150, False), (135, False), (225, False),
+                                            (210, False), (90, False)])
+def test_a_joint_is_where_the_boundary_turns_little(degrees, joint):
+    x, cells, features = _fan(degrees)
+    assert with_smooth_joints(features, x, cells).joints.tolist() == ([0] if joint else [])
+
+
+def test_the_cad_angle_decides_where_the_corners_are_given():
+    x, cells, features = _fan(150)  # the triangles turn by 30° at node 0
+    assert with_smooth_joints(features, x, cells).joints.size == 0
+    rim = tuple(Corner(*x[v], math.radians(90)) for v in (1, 5))  # the rim's ends
+    # a circle's end point: the CAD has no corner there, its chords turn
+    assert with_smooth_joints(features, x, cells, corners=rim).joints.tolist() == [0]
+    x, cells, _ = _fan(180)
+    rim = tuple(Corner(*x[v], math.radians(90)) for v in (1, 5))
+    assert with_smooth_joints(features, x, cells, corners=rim).joints.tolist() == [0]
+    corner = (Corner(0.0, 0.0, math.radians(135)),)  # a 135° corner the triangles round off
+    assert with_smooth_joints(features, x, cells, corners=rim + corner).joints.size == 0
+
+
+@pytest.mark.parametrize("degrees, tie", [(135, True), (225, True), (90, False), (150, False),
+                                          (180, False), (270, False)])
+def test_tie_corners_are_the_135_and_225_degree_corners(degrees, tie):
+    x, cells, features = _fan(degrees)
+    found = with_tie_corners(features, x, cells).tie_corners.tolist()
+    assert (0 in found) == tie
+    rim = tuple(Corner(*x[v], math.radians(90)) for v in (1, 5))  # the CAD says the same
+    here = (Corner(0.0, 0.0, math.radians(degrees)),) if degrees != 180 else ()
+    assert with_tie_corners(features, x, cells, rim + here).tie_corners.tolist() == \
+        ([0] if tie else [])
+    assert len(features.tie_corners) == 0  # none by default

@@ -574,8 +574,9 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     cells = counterclockwise(x, cells)
     q = np.asarray(q, dtype=np.float64)
     frames = odeco.q_to_frames(q)
-    if features is not None and len(features.junction_nodes):
-        given_frames = junction_frames(cells, features.junction_nodes, frames, given_frames)
+    if features is not None and len(features.junction_nodes) + len(features.tie_corners):
+        held = np.union1d(features.junction_nodes, features.tie_corners)
+        given_frames = junction_frames(cells, held, frames, given_frames)
     angle, l1, l2 = face_frames_with(cells, q, given_frames, frames)
     edges, faces = interior_edges(cells)
     k = matchings(angle, faces)

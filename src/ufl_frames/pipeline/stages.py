@@ -62,25 +62,30 @@ class RootField:
 
     ``domain`` is the field's :class:`~ufl_frames.mesh.Domain`; the gathered arrays,
     ``features`` (the model's regions, curves and points on them, with the smooth joints
-    a quad edge may span and the interior curves' junctions:
+    a quad edge may span, the 135° and 225° corners and the interior curves' junctions:
     :class:`~ufl_frames.param.features.Features`,
     :func:`~ufl_frames.param.features.with_smooth_joints`,
+    :func:`~ufl_frames.param.features.with_tie_corners`,
     :func:`~ufl_frames.param.features.with_junctions`) and the
     :class:`~ufl_frames.param.cut.CutMesh` (one per set of close ± pairs removed:
     :meth:`_cut_mesh`) live on rank 0 only (None elsewhere).
     """
 
     def __init__(self, frames: FrameField):
-        from ufl_frames.param.features import with_junctions, with_smooth_joints
+        from ufl_frames.param.features import with_junctions, with_smooth_joints, with_tie_corners
         from ufl_frames.param.gather import gather_features, gather_field
 
         self.domain = frames.domain
         self._arrays = gather_field(frames.q)  # (x, cells, rows) on rank 0
         self.features = gather_features(frames.domain)
         if self.features is not None:  # a polyline's vertices need not be quad vertices
+            corners = _cad_corners(frames.domain)
             self.features = with_smooth_joints(
                 self.features, self._arrays[0], self._arrays[1],
-                getattr(frames.domain, "physical_groups", ()))
+                getattr(frames.domain, "physical_groups", ()), corners)
+            # 135° and 225° corners: their triangles take their other vertices' frames
+            self.features = with_tie_corners(self.features, self._arrays[0],
+                                             self._arrays[1], corners)
             # the triangles at the curves' junctions take their other vertices' frames
             self.features = with_junctions(self.features, self._arrays[0],
                                            getattr(frames.domain, "junctions", ()))
@@ -138,6 +143,19 @@ class RootField:
         if error is not None:
             raise ValueError(error)
         return kept, comm.bcast(shared, root=0)
+
+
+def _cad_corners(domain):
+    """The domain's corners where they come from a CAD model (its curves' tangents: a point
+    at none is smooth), None for a ``.msh`` (corners from the mesh, whose boundary is then
+    the geometry: :func:`~ufl_frames.param.features.with_smooth_joints` takes its angles)."""
+    from pathlib import Path
+
+    from ufl_frames.mesh.files import MESH_EXTENSIONS
+
+    if Path(str(domain.source)).suffix.lower() in MESH_EXTENSIONS:
+        return None
+    return tuple(getattr(domain, "corners", ()))
 
 
 def _root(source) -> RootField:
