@@ -12,7 +12,9 @@ Interior curve edges (two triangles) are where the map's coordinate across the c
 constant and integer, as on the boundary; model points are quad vertices, except the
 smooth joints (:func:`with_smooth_joints`): a point where two boundary curves meet and the
 boundary turns by less than :data:`SMOOTH_TURN` (a polyline's vertices, say), which a quad
-edge may span.
+edge may span. The tie corners (:func:`with_tie_corners`, 135° and 225°) and the junctions
+of interior curves (:func:`with_junctions`) are the points where no cross fits both curves:
+the cut gives their triangles their other vertices' frames.
 """
 
 from dataclasses import dataclass, field, replace
