@@ -62,11 +62,18 @@ def assert_same(a, b, q):
 #: turn by only ~1e-6, so rounding moves the answer by ~1e-10 there. For these the distance
 #: is compared, not the frame. The aligned projection starts from the unconstrained one, so
 #: where that is not unique the two codes may reach different local minima of the aligned
-#: problem ("none": only the alignment is checked).
+#: problem ("none": only the alignment is checked). Perturbed by 1e-3, a frame near one
+#: branch has minor lengths ~1e-4 whose directions are ill-conditioned: on one of its 400
+#: rows (lengths 1.0004, 1.6e-4, 6.9e-5) a 1e-14 change of q moves the NumPy projection by
+#: 3.3e-10, so the two codes' rounding (another CPU, other compiler flags) may differ there
+#: by more than TOL (4.6e-10 seen) while their distances agree to 4e-14. The aligned
+#: projection of the exact single branch (not isotropic) has the same two minima: on
+#: another CPU one of its 400 rows ended 2.8e-6 closer to q in the compiled code.
 NOT_UNIQUE = {("one branch, exact", True, False): "distance",
+              ("one branch, 0.001", False, False): "distance",
               ("one branch, 1e-06", True, False): "distance",
               ("one branch, 1e-06", True, True): "distance",
-              ("one branch, exact", False, True): "distance",
+              ("one branch, exact", False, True): "none",
               ("one branch, exact", True, True): "none"}
 
 
