@@ -9,9 +9,11 @@
 The field is gathered onto rank 0 (:func:`~ufl_frames.param.gather.gather_field`) once
 per :class:`RootField`; there its ± pairs of singularities closer than half a quad are
 removed (:func:`~ufl_frames.param.pairs.remove_close_pairs`: the map's input changes, the
-field does not) and it is cut into a disk (:func:`~ufl_frames.param.cut.cut_mesh`), once
-per set of pairs removed: stages at quad sizes that remove the same pairs start from the
-same :class:`~ufl_frames.param.cut.CutMesh`. Each stage is
+field does not), singular vertices closer than :data:`GLUE_WITHIN` quad edges to the
+boundary are moved onto it, and it is cut into a disk
+(:func:`~ufl_frames.param.cut.cut_mesh`), once per set of pairs removed and quad size:
+stages at the same quad size start from the same :class:`~ufl_frames.param.cut.CutMesh`.
+Each stage is
 collective and returns a frozen record whose measures are the same on every rank.
 """
 
@@ -59,8 +61,9 @@ class QuadMeshed:
 #: Singular vertices closer than this many local quad edges to the boundary are moved
 #: onto it before the map (:func:`~ufl_frames.param.cut.glue_to_boundary`): their
 #: separatrices would run along the boundary a sliver away (Gmsh's fleur: the −1/4 at the
-#: petals' tips, 0.1–0.3 quad edges off at 800 quads).
-GLUE_WITHIN = 0.4
+#: petals' tips, 0.06–0.13 local quad edges off at 800 quads; gmsh_t4_holes' −1/4 at
+#: 0.33–0.38 are better left where they are).
+GLUE_WITHIN = 0.2
 
 
 class RootField:
@@ -108,7 +111,9 @@ class RootField:
         size or count (neither: :data:`TRIANGLES_PER_QUAD` triangles a quad): the field
         with its ± pairs closer than :data:`~ufl_frames.param.pairs.CLOSER_THAN` local
         quad edges removed (:func:`~ufl_frames.param.pairs.remove_close_pairs`), cut
-        into a disk; one cut per set of pairs removed, kept for every later stage."""
+        into a disk, with the singular vertices closer than :data:`GLUE_WITHIN` local
+        quad edges to the boundary moved onto it; one cut per set of pairs removed and
+        quad size (or count), kept for every later stage."""
         from ufl_frames.param import cut, pairs
 
         x, cells, _ = self._arrays
