@@ -56,3 +56,44 @@ def test_cusps_of_27_degrees_are_squeezed_quad_corners(tmp_path):
         for c in cusps:
             at = np.linalg.norm(points - [c.x, c.y], axis=1)
             assert at.min() < 1e-9 and valence[np.argmin(at)] == 2
+
+
+#: Two of Gmsh's fleur's petals (ellipses 0.71 × 0.145 from the origin, 30° apart) cut out
+#: of a box: one 23.6° cusp between them, and tips bent with a radius of 0.03, where the
+#: field's −1/4 singular vertices sit 0.01–0.04 off the boundary.
+PETALS = """SetFactory("OpenCASCADE");
+Rectangle(1) = {-1, -1, 0, 3, 3};
+Disk(2) = {0.71, 0, 0, 0.71, 0.145};
+Disk(3) = {0.71, 0, 0, 0.71, 0.145};
+Rotate {{0, 0, 1}, {0, 0, 0}, Pi/6} { Surface{3}; }
+BooleanUnion(4) = { Surface{2}; Delete; }{ Surface{3}; Delete; };
+BooleanDifference(5) = { Surface{1}; Delete; }{ Surface{4}; Delete; };
+Mesh.MeshSizeFromCurvature = 15;
+Mesh.MeshSizeMax = 0.1;
+"""
+
+
+def test_singular_vertices_at_the_petals_tips_are_glued_to_the_boundary(tmp_path):
+    """Before, the −1/4 next to each tip stayed a sliver off the boundary and its
+    separatrix ran along the petal to the cusp: the layout made quads of no width there
+    (SJ ≤ 0 or non-positive area at quad sizes 0.3, 0.2, 0.15) and greedy rounding
+    folded. Now they are moved onto the boundary (``stages.GLUE_WITHIN``)."""
+    from ufl_frames.quads.measures import vertex_valence
+
+    path = Path(COMM.bcast(str(tmp_path), root=0)) / "petals.geo"
+    if COMM.rank == 0:
+        path.write_text(PETALS)
+    COMM.barrier()
+    domain = load(COMM, path)
+    cusps = [c for c in domain.corners if c.angle < np.pi / 4]
+    assert len(cusps) == 1 and np.degrees(cusps[0].angle) == pytest.approx(23.6, abs=0.3)
+    field = FrameField.initial(domain, isotropic=True).conformal()
+    quads = quadrangulate(RootField(field), 0.2)
+    quality = quads.quality
+    assert quality["valid"] and quality["problems"] == []
+    assert quality["quantisation"] == "layout" and quality["cancelled_singularities"] >= 2
+    assert quality["min_sj"] >= 0.3 and quality["area_error"] < 0.005
+    if COMM.rank == 0:
+        points, cells = quads.mesh.points[:, :2], quads.mesh.quads
+        at = np.linalg.norm(points - [cusps[0].x, cusps[0].y], axis=1)
+        assert at.min() < 1e-9 and vertex_valence(points, cells)["valence"][np.argmin(at)] == 2

@@ -268,17 +268,51 @@ def cancel_pairs(x, cells, edges, faces, k, singular, turns, within: float):
             v = u
         used.update((a, b))
         cancelled += 1
-    # the rest closer than within/2 to the boundary: their quarter moves onto the nearest
-    # boundary vertex, which becomes a corner of the grid (its two boundary edges get
-    # different constant coordinates), a boundary vertex of valence 3 or 5
+    k, glued = glue_to_boundary(x, cells, edges, faces, k, singular, turns, within / 2,
+                                skip=used)
+    return k, cancelled + glued
+
+
+def glue_to_boundary(x, cells, edges, faces, k, singular, turns, within, skip=(),
+                     keep=()) -> tuple[np.ndarray, int]:
+    """The matchings with every singular vertex closer than ``within`` to the boundary
+    (along interior edges) moved onto the nearest boundary vertex: each edge's matching on
+    the shortest path turned by the vertex's quarters, which become that boundary
+    vertex's, a corner of the grid (its two boundary edges get different constant
+    coordinates: a boundary vertex of valence 3 or 5). The field is not changed.
+
+    Args:
+        x, cells, edges, faces, k, singular, turns: as for :func:`cancel_pairs`.
+        within: the distance, a number or one per vertex (n,) (the singular vertex's).
+        skip: singular vertices left where they are.
+        keep: boundary vertices that take none (the model's required points: their
+            quad corners are the model's).
+
+    Returns:
+        (k, glued): the new matchings (E,) and the number of vertices moved.
+    """
+    k = k.copy()
+    n = x.shape[0]
+    inner = np.flatnonzero(faces[:, 1] >= 0)
+    length = np.linalg.norm(x[edges[inner, 1]] - x[edges[inner, 0]], axis=1)
+    graph = sp.csr_matrix((length, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
+    graph = graph + graph.T
+    edge_id = sp.csr_matrix((inner + 1.0, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
+    edge_id = edge_id + edge_id.T
     on_boundary = np.zeros(n, dtype=bool)
     on_boundary[edges[faces[:, 1] < 0].ravel()] = True
+    on_boundary[np.asarray(keep, dtype=np.int64)] = False
     boundary = np.flatnonzero(on_boundary)
-    for a in (int(v) for v in singular if int(v) not in used):
+    reach = np.broadcast_to(np.asarray(within, dtype=np.float64), (n,))
+    skip, glued = set(int(v) for v in skip), 0
+    if boundary.size == 0:
+        return k, 0
+    for a in (int(v) for v in singular if int(v) not in skip):
         distance, predecessors = csgraph.dijkstra(graph, directed=False, indices=a,
+                                                  limit=float(reach[a]),
                                                   return_predecessors=True)
         b = int(boundary[np.argmin(distance[boundary])])
-        if not distance[b] < within / 2:
+        if not distance[b] < reach[a]:
             continue
         turn = int(turns[np.flatnonzero(singular == a)[0]])
         v = b
@@ -288,9 +322,8 @@ def cancel_pairs(x, cells, edges, faces, k, singular, turns, within: float):
             for _ in range(abs(turn)):
                 k[e] = _moved(cells, edges, faces, e, u, k[e], np.sign(turn))
             v = u
-        used.add(a)
-        cancelled += 1
-    return k, cancelled
+        glued += 1
+    return k, glued
 
 
 def _moved(cells, edges, faces, e, u, k_e, turn: int = 1):
@@ -545,7 +578,8 @@ class CutMesh:
 
 
 def cut_mesh(x, cells, q, cancel_within: float | None = None,
-             features: Features | None = None, given_frames=None) -> CutMesh:
+             features: Features | None = None, given_frames=None,
+             glue_within=None) -> CutMesh:
     """:class:`CutMesh` of the P1 frame field ``q`` (n, 5) on the mesh ``x``, ``cells``;
     with ``cancel_within``, opposite singular vertices closer than that are cancelled
     (:func:`cancel_pairs`); ``features`` kept on the record (the map's interior curves and
@@ -559,6 +593,9 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
         features: the geometry's regions, curves and points on this mesh, or None.
         given_frames: (triangles, angle, l1, l2), frames of those triangles to take as
             they are (:func:`face_frames_with`), or None.
+        glue_within: singular vertices closer than this to the boundary (a number or
+            one per vertex (n,)) are moved onto it (:func:`glue_to_boundary`; not onto
+            the features' required points); None: none. Counted in ``cancelled``.
 
     Returns:
         The :class:`CutMesh`, with the combed frames and the field's vertex angles.
@@ -585,6 +622,13 @@ def cut_mesh(x, cells, q, cancel_within: float | None = None,
     if cancel_within:
         k, cancelled = cancel_pairs(x, cells, edges, faces, k, singular, turns, cancel_within)
         singular, turns = singular_vertices(cells, angle, edges, faces, k)
+    if glue_within is not None and singular.size:
+        keep = () if features is None else features.required_points
+        k, glued = glue_to_boundary(x, cells, edges, faces, k, singular, turns, glue_within,
+                                    keep=keep)
+        if glued:
+            cancelled += glued
+            singular, turns = singular_vertices(cells, angle, edges, faces, k)
     cut, paths = cut_graph(x, cells, edges, faces, singular)
     r = comb(angle, faces, k, cut)
     angle, l1, l2 = relabel(angle, l1, l2, r)
