@@ -20,6 +20,7 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
+from msh_readback import read_msh
 
 from ufl_frames.app import cli  # noqa: E402
 
@@ -42,29 +43,6 @@ x0 = 3; w = 0.5; Call Slab;
 """
 
 
-def msh_quads(path):
-    """(points (n, 2), quads (m, 4)) of the 4-node quads in ``path``, read by Gmsh."""
-    import gmsh
-
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("read back")
-        gmsh.open(str(path))
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        x = np.zeros((int(tags.max()) + 1, 2))
-        x[tags.astype(int)] = coords.reshape(-1, 3)[:, :2]
-        _, nodes = gmsh.model.mesh.getElementsByType(3)
-        return x, nodes.astype(int).reshape(-1, 4)
-    finally:
-        if owns:
-            gmsh.finalize()
-        else:
-            gmsh.model.remove()
-
-
 def test_solve_quads_of_two_components_drawn_by_a_function(tmp_path_factory):
     root = Path(COMM.bcast(str(tmp_path_factory.mktemp("slabs")), root=0))
     geo = root / "two_slabs.geo"
@@ -78,7 +56,7 @@ def test_solve_quads_of_two_components_drawn_by_a_function(tmp_path_factory):
     assert quads["valid"], quads["problems"]
     assert quads["min_sj"] >= 0.3
     if COMM.rank == 0:
-        x, q = msh_quads(out / "quads.msh")
+        x, q, _ = read_msh(out / "quads.msh", dim=2)
         p = x[q]
         area = 0.5 * np.abs(np.sum(p[:, :, 0] * np.roll(p[:, :, 1], -1, axis=1)
                                    - np.roll(p[:, :, 0], -1, axis=1) * p[:, :, 1], axis=1))

@@ -21,6 +21,7 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
+from msh_readback import read_msh
 
 from ufl_frames.app import cli  # noqa: E402
 
@@ -44,29 +45,6 @@ def disk_run(tmp_path_factory):
     return out, json.loads((out / "summary.json").read_text())
 
 
-def msh_nodes(path):
-    """The nodes (n, 2) of ``path`` and the nodes of its boundary lines, read by Gmsh."""
-    import gmsh
-
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("read back")
-        gmsh.open(str(path))
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        x = np.zeros((int(tags.max()), 2))
-        x[tags.astype(int) - 1] = coords.reshape(-1, 3)[:, :2]
-        _, _, lines = gmsh.model.mesh.getElements(1)
-        return x, np.unique(np.concatenate(lines).astype(int) - 1)
-    finally:
-        if owns:
-            gmsh.finalize()
-        else:
-            gmsh.model.remove()
-
-
 def test_files_and_summary(disk_run):
     out, summary = disk_run
     assert {p.name for p in out.iterdir()} == FILES
@@ -88,7 +66,7 @@ def test_boundary_nodes_on_the_circle(disk_run):
     assert 1e-6 * diameter < cad["max_offset_before"] < 1e-2 * diameter
     assert cad["refused"] == 0 and cad["moved"] > 0 and cad["note"] is None
     if COMM.rank == 0:
-        x, boundary = msh_nodes(out / "quads.msh")
+        x, _, boundary = read_msh(out / "quads.msh", dim=2)
         # every boundary node moved onto the circle, except the circle's model point: a
         # quad vertex that the triangle mesh already had exactly on the point
         assert boundary.size - cad["moved"] in (0, 1)
@@ -152,7 +130,7 @@ def test_quad_count_and_nodes_on_the_piano_arcs(tmp_path_factory):
     diameter = math.hypot(2.0, 1.2)
     assert found["cad"]["max_offset_before"] > 1e-5 * diameter
     if COMM.rank == 0:
-        x, boundary = msh_nodes(root / "o" / "quads.msh")
+        x, _, boundary = read_msh(root / "o" / "quads.msh", dim=2)
         assert piano_distance(x[boundary]).max() < 1e-9 * diameter
 
 
@@ -200,7 +178,7 @@ def test_mesh_under_mpirun(tmp_path):
     summary = json.loads((tmp_path / "par" / "summary.json").read_text())
     assert summary["num_processes"] == 2
     assert {p.name for p in (tmp_path / "par").iterdir()} == FILES
-    x, boundary = msh_nodes(tmp_path / "par" / "quads.msh")
+    x, _, boundary = read_msh(tmp_path / "par" / "quads.msh", dim=2)
     assert np.abs(np.linalg.norm(x[boundary], axis=1) - RADIUS).max() < 2e-9
 
 

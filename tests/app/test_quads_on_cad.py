@@ -21,6 +21,7 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
+from msh_readback import read_msh
 
 from ufl_frames.app import cli  # noqa: E402
 
@@ -33,32 +34,6 @@ Rectangle(1) = {{0, 0, 0, {WIDTH}, {HEIGHT}}};
 Disk(2) = {{{CENTRE[0]}, {CENTRE[1]}, 0, {RADIUS}}};
 BooleanDifference(3) = {{ Surface{{1}}; Delete; }}{{ Surface{{2}}; Delete; }};
 """
-
-
-def read_quads(path):
-    """(nodes (n, 2), quads (m, 4), nodes on the mesh's lines) of ``path``, read by Gmsh."""
-    import gmsh
-
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("read back")
-        gmsh.open(str(path))
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        x = np.zeros((int(tags.max()), 2))
-        x[tags.astype(int) - 1] = coords.reshape(-1, 3)[:, :2]
-        kinds, _, nodes = gmsh.model.mesh.getElements(2)
-        assert list(kinds) == [3], "quads only"
-        _, _, lines = gmsh.model.mesh.getElements(1)
-        return (x, nodes[0].astype(int).reshape(-1, 4) - 1,
-                np.unique(np.concatenate(lines).astype(int) - 1))
-    finally:
-        if owns:
-            gmsh.finalize()
-        else:
-            gmsh.model.remove()
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +53,7 @@ def plate_run(tmp_path_factory):
 
 def test_boundary_nodes_on_the_circle_and_the_sides(plate_run):
     path, summary = plate_run
-    x, _, boundary = read_quads(path)
+    x, _, boundary = read_msh(path, dim=2)
     on = x[boundary]
     off_circle = np.abs(np.hypot(on[:, 0] - CENTRE[0], on[:, 1] - CENTRE[1]) - RADIUS)
     off_sides = np.min(np.abs(np.stack([on[:, 0], on[:, 0] - WIDTH, on[:, 1],
@@ -93,7 +68,7 @@ def test_boundary_nodes_on_the_circle_and_the_sides(plate_run):
 
 def test_area_within_half_a_percent(plate_run):
     path, summary = plate_run
-    x, quads, _ = read_quads(path)
+    x, quads, _ = read_msh(path, dim=2)
     p = x[quads]
     signed = 0.5 * (p[:, :, 0] * np.roll(p[:, :, 1], -1, axis=1)
                     - np.roll(p[:, :, 0], -1, axis=1) * p[:, :, 1]).sum(axis=1)

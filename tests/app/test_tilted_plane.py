@@ -20,6 +20,7 @@ from ufl_frames.bootstrap import init_petsc
 init_petsc([])  # not pytest's command line
 
 from mpi4py import MPI  # noqa: E402
+from msh_readback import read_msh
 
 from ufl_frames.app import cli  # noqa: E402
 
@@ -99,32 +100,6 @@ def runs(request, tmp_path_factory):
     centre = SHIFT - np.asarray(plane["origin"])
     shift = (centre @ np.asarray(plane["e1"]), centre @ np.asarray(plane["e2"]))
     return shape, tilted, mesh_run(root, shape, False, shift)
-
-
-def read_msh(path):
-    """Gmsh reading ``path`` back: nodes (n, 3), quads (m, 4) and the boundary lines'
-    nodes, as indices into the nodes."""
-    import gmsh
-
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(argv=[], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("read back")
-        gmsh.open(str(path))
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        x = np.zeros((int(tags.max()), 3))
-        x[tags.astype(int) - 1] = coords.reshape(-1, 3)
-        _, quads = gmsh.model.mesh.getElementsByType(3)
-        _, _, lines = gmsh.model.mesh.getElements(1)
-        return (x, quads.astype(int).reshape(-1, 4) - 1,
-                np.unique(np.concatenate(lines).astype(int) - 1))
-    finally:
-        if owns:
-            gmsh.finalize()
-        else:
-            gmsh.model.remove()
 
 
 def test_quads_written_in_the_tilted_plane(runs):
