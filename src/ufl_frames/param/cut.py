@@ -244,13 +244,7 @@ def cancel_pairs(x, cells, edges, faces, k, singular, turns, within: float):
     distance = np.linalg.norm(x[positive][:, None] - x[negative][None], axis=2)
     candidates = sorted((distance[i, j], i, j) for i, j in zip(*np.nonzero(distance < within),
                                                                 strict=True))
-    n = x.shape[0]
-    inner = np.flatnonzero(faces[:, 1] >= 0)
-    length = np.linalg.norm(x[edges[inner, 1]] - x[edges[inner, 0]], axis=1)
-    graph = sp.csr_matrix((length, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
-    graph = graph + graph.T
-    edge_id = sp.csr_matrix((inner + 1.0, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
-    edge_id = edge_id + edge_id.T
+    graph, edge_id = _interior_graph(x, edges, faces)
     used, cancelled = set(), 0
     for _, i, j in candidates:
         a, b = int(positive[i]), int(negative[j])
@@ -273,6 +267,17 @@ def cancel_pairs(x, cells, edges, faces, k, singular, turns, within: float):
     return k, cancelled + glued
 
 
+def _interior_graph(x, edges, faces):
+    """(graph, edge_id): the interior edges as a symmetric sparse graph weighted by their
+    lengths, and the edge index + 1 of each (u, v) (0: no interior edge)."""
+    n = x.shape[0]
+    inner = np.flatnonzero(faces[:, 1] >= 0)
+    length = np.linalg.norm(x[edges[inner, 1]] - x[edges[inner, 0]], axis=1)
+    graph = sp.csr_matrix((length, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
+    edge_id = sp.csr_matrix((inner + 1.0, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
+    return graph + graph.T, edge_id + edge_id.T
+
+
 def glue_to_boundary(x, cells, edges, faces, k, singular, turns, within, skip=(),
                      keep=()) -> tuple[np.ndarray, int]:
     """The matchings with every singular vertex closer than ``within`` to the boundary
@@ -293,12 +298,7 @@ def glue_to_boundary(x, cells, edges, faces, k, singular, turns, within, skip=()
     """
     k = k.copy()
     n = x.shape[0]
-    inner = np.flatnonzero(faces[:, 1] >= 0)
-    length = np.linalg.norm(x[edges[inner, 1]] - x[edges[inner, 0]], axis=1)
-    graph = sp.csr_matrix((length, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
-    graph = graph + graph.T
-    edge_id = sp.csr_matrix((inner + 1.0, (edges[inner, 0], edges[inner, 1])), shape=(n, n))
-    edge_id = edge_id + edge_id.T
+    graph, edge_id = _interior_graph(x, edges, faces)
     on_boundary = np.zeros(n, dtype=bool)
     on_boundary[edges[faces[:, 1] < 0].ravel()] = True
     on_boundary[np.asarray(keep, dtype=np.int64)] = False
