@@ -17,9 +17,10 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    An arc at a model point may collapse (a trace passing a fraction of a quad from a
    corner, the airfoil's trailing edge say, goes through it), the model point staying
    where it is, but not so as to glue it to another model or curve point or to another
-   boundary point (:meth:`_Points.bad_merges`); an interior curve's arcs may collapse
-   too, gluing points along the curve (two traces from its two sides landing a hair apart,
-   or a hair from a model point on it, end at one point), but not two model points (the
+   boundary point (:meth:`_Points.bad_merges`); an interior curve's arcs shorter than
+   :data:`CURVE_COLLAPSE_BELOW` may collapse too, gluing points along the curve (two traces
+   from its two sides landing a hair apart, or a hair from a model point on it, end at one
+   point), but not two model points (the
    longest zero arc between them gets 1). So
    a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
    goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
@@ -38,12 +39,13 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    round would otherwise be a polygon of a few chords;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
    integer positions along each arc (uniform in the map; an arc that is a side by itself
-   has its points across from the opposite side's, :func:`_facing_fractions`, so that a
-   thin patch is not sheared), the inside by transfinite
-   (Coons) blending in the patch's rectangle of the parameter plane, and every point
-   mapped back to the plane by walking the triangles of the map from the patch's corner
-   (straight segments in the patch's chart, across seams). Arc points are computed once,
-   so the patches that share an arc share its points: the quads are conforming; points
+   of a patch thinner than :data:`FACING_BELOW` quads has its points across from the
+   opposite side's, :func:`_facing_fractions`, so that a thin patch is not sheared), the
+   inside by transfinite (Coons) blending in the patch's rectangle of the parameter
+   plane, and every point mapped back to the plane by walking the triangles of the map
+   from the patch's corner (straight segments in the patch's chart, across seams). Arc
+   points are computed once, so the patches that share an arc share its points: the quads
+   are conforming; points
    glued by a collapse become one (a boundary corner's, else the boundary's, else the
    singular vertex's, else their mean). Where that point has no one place on the
    boundary (singular vertices glued to it, or several boundary points or corners glued,
@@ -71,11 +73,22 @@ from ufl_frames.quads.improve import onto_boundary
 from ufl_frames.quads.layout import Layout, layout, piece_length, untangle
 from ufl_frames.quads.motorcycles import rot
 
-__all__ = ["CHORD_SAGITTA", "COLLAPSE_BELOW", "arc_turning", "integer_lengths",
-           "min_curve_lengths", "patch_quads", "quads_of_map"]
+__all__ = ["CHORD_SAGITTA", "COLLAPSE_BELOW", "CURVE_COLLAPSE_BELOW", "FACING_BELOW",
+           "arc_turning", "integer_lengths", "min_curve_lengths", "patch_quads",
+           "quads_of_map"]
 
 #: Arcs shorter than this (in quads) may get length 0 (:func:`integer_lengths`).
 COLLAPSE_BELOW = 0.5
+#: An interior curve's arc may get length 0 only if shorter than this (in quads): its
+#: collapse glues two points along the curve and shears the quads on both sides by its
+#: length. The rotor sector's (trace ends a hair from a model point) are under 0.01 of a
+#: quad; deal.II step-49's one of 0.38 at 400 quads took its min SJ from 0.71 to 0.43.
+CURVE_COLLAPSE_BELOW = 0.1
+#: A patch side that is one arc gets its points across from the opposite side's only where
+#: the patch is thinner than this (in quads, :func:`_facing_fractions`); thicker patches
+#: keep them uniform in the map (the gear, vnotch_plate: patches 2.4–12 quads thick whose
+#: points moved by up to a quad).
+FACING_BELOW = 1.0
 #: A quad edge along a curved boundary or interior curve stays within this share of the
 #: quad size of its curve (its chord's sagitta; :func:`min_curve_lengths`). With 0.04 a
 #: hole 4, 6, 10, 16 quads round in the map gets at least 9, 11, 14, 18 edges (its polygon
@@ -191,9 +204,12 @@ def integer_lengths(lay: Layout, weights=None,
     """
     L = lay.lengths()
     w = np.ones(L.size) if weights is None else np.asarray(weights, dtype=float)
-    # an interior curve's arcs may collapse too (two trace ends on it a fraction of a
-    # quad apart become one); bad_merges keeps its model points and its pieces apart
+    # an interior curve's arcs may collapse too, if shorter than CURVE_COLLAPSE_BELOW
+    # (two trace ends on it a hair apart become one); bad_merges keeps its model points
+    # and its pieces apart
     lower = np.where(L < collapse_below, 0.0, 1.0)
+    lower[[a for a, arc in enumerate(lay.arcs)
+           if arc.curve and L[a] >= min(collapse_below, CURVE_COLLAPSE_BELOW)]] = 1.0
     need = min_curve_lengths(lay, CHORD_SAGITTA if sagitta is None else sagitta)
     lower = np.where(need >= 2, np.maximum(lower, need), lower)  # 1: as before (collapses)
     for _ in range(L.size + 1):
@@ -698,16 +714,19 @@ def _side_positions(lay: Layout, n: np.ndarray, side, fractions) -> np.ndarray:
 
 def _facing_fractions(lay: Layout, n: np.ndarray) -> list:
     """Per arc the fractions of its length where its inner points go, or None (uniform,
-    k/n). An arc that is a whole side of a patch by itself (but for zero arcs) has them
-    across from the opposite side's points (at their lengths along that side, scaled to
-    this one), not uniform; of the patches it is such a side of (a boundary arc has one, a
-    trace or a curve two), the thinnest (the least length across, in the map) sets them,
-    the thinnest patches first (so that a patch whose two sides are single arcs passes on
+    k/n). An arc that is a whole side by itself (but for zero arcs) of a patch thinner
+    than :data:`FACING_BELOW` quads has them across from the opposite side's points (at
+    their lengths along that side, scaled to this one), not uniform; of the patches it is
+    such a side of (a boundary arc has one, a trace or a curve two), the thinnest (the
+    least length across, in the map) sets them, the thinnest patches first (so that a patch
+    whose two sides are single arcs passes on
     the points its thinner neighbour gave one of them). A thin patch (one quad across an
     air gap between the boundary and an interface, or between an interface and a trace
     passing close to it) whose other side is split unevenly (the interface's model points,
     the ends of traces from the other side) would otherwise have its quads sheared by up to
-    a quad's length across their thickness."""
+    a quad's length across their thickness. A thicker patch keeps them uniform: even
+    spacing in the map is what the map's conformality wants there, and points moved by up
+    to a quad along a side several quads from the uneven one skewed the quads at it."""
     fractions: list = [None] * len(lay.arcs)
     candidates = []
     for p, sides in enumerate(lay.patches):
@@ -715,7 +734,8 @@ def _facing_fractions(lay: Layout, n: np.ndarray) -> list:
             kept = [h for h in side if n[h // 2] > 0]  # zero arcs have no points
             if len(kept) == 1 and n[kept[0] // 2] >= 2:
                 thickness = sum(lay.arcs[g // 2].length for g in sides[(s + 1) % 4])
-                candidates.append((thickness, p, s, kept[0]))
+                if thickness < FACING_BELOW:
+                    candidates.append((thickness, p, s, kept[0]))
     for _, p, s, h in sorted(candidates):
         sides = lay.patches[p]
         if fractions[h // 2] is not None:
