@@ -20,9 +20,8 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    boundary point (:meth:`_Points.bad_merges`); an interior curve's arcs shorter than
    :data:`CURVE_COLLAPSE_BELOW` may collapse too, gluing points along the curve (two traces
    from its two sides landing a hair apart, or a hair from a model point on it, end at one
-   point), but not two model points (the
-   longest zero arc between them gets 1). So
-   a valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
+   point), but not two model points (the longest zero arc between them gets 1). So a
+   valence-5 singular vertex (turn −1) a fraction of a quad from a straight boundary
    goes onto it, a boundary vertex in three quads of about 60° (the thin patches between
    its separatrices and the boundary collapse: no sliver layer); a valence-3 one (turn
    +1) does not (one quad with a 180° corner); two valence-5 ones next to a 240° corner
@@ -38,22 +37,21 @@ Kobbelt 2015), on the layout of :func:`ufl_frames.quads.layout.layout`.
    quads from the curve to wherever the program closes it. A small hole a few quads
    round would otherwise be a polygon of a few chords;
 2. **quads** (:func:`patch_quads`): per patch a W × H grid, its boundary points at the
-   integer positions along each arc (uniform in the map; an arc that is a side by itself
-   of a patch thinner than :data:`FACING_BELOW` quads has its points across from the
-   opposite side's, :func:`_facing_fractions`, so that a thin patch is not sheared), the
-   inside by transfinite (Coons) blending in the patch's rectangle of the parameter
-   plane, and every point mapped back to the plane by walking the triangles of the map
-   from the patch's corner (straight segments in the patch's chart, across seams). Arc
-   points are computed once, so the patches that share an arc share its points: the quads
-   are conforming; points
-   glued by a collapse become one (a boundary corner's, else the boundary's, else the
-   singular vertex's, else their mean). Where that point has no one place on the
+   integer positions along each arc (uniform in the map; an arc that is a side by itself of
+   a patch thinner than :data:`FACING_BELOW` quads has its points across from the opposite
+   side's, :func:`_facing_fractions`, so that a thin patch is not sheared), the inside by
+   transfinite (Coons) blending in the patch's rectangle of the parameter plane, and every
+   point mapped back to the plane by walking the triangles of the map from the patch's
+   corner (straight segments in the patch's chart, across seams). Arc points are computed
+   once, so the patches that share an arc share its points: the quads are conforming;
+   points glued by a collapse become one (a boundary corner's, else the boundary's, else
+   the singular vertex's, else their mean). Where that point has no one place on the
    boundary (singular vertices glued to it, or several boundary points or corners glued,
    none a model or curve point), it goes on the boundary between its two boundary
    neighbours where its two quad edges follow it best
-   (:func:`~ufl_frames.quads.improve.onto_boundary`): at a round nose a fraction of a
-   quad wide, whose thin patches collapse and glue its −1/4 singular vertices to it, the
-   nose's tip.
+   (:func:`~ufl_frames.quads.improve.onto_boundary`): at a round nose a fraction of a quad
+   wide, whose thin patches collapse and glue its −1/4 singular vertices to it, the nose's
+   tip.
 
 Pure NumPy/SciPy. :func:`quads_of_map` runs the whole chain on a seamless map (of one or
 more connected components: each has its own patches).
@@ -714,19 +712,19 @@ def _side_positions(lay: Layout, n: np.ndarray, side, fractions) -> np.ndarray:
 
 def _facing_fractions(lay: Layout, n: np.ndarray) -> list:
     """Per arc the fractions of its length where its inner points go, or None (uniform,
-    k/n). An arc that is a whole side by itself (but for zero arcs) of a patch thinner
-    than :data:`FACING_BELOW` quads has them across from the opposite side's points (at
-    their lengths along that side, scaled to this one), not uniform; of the patches it is
-    such a side of (a boundary arc has one, a trace or a curve two), the thinnest (the
-    least length across, in the map) sets them, the thinnest patches first (so that a patch
-    whose two sides are single arcs passes on
-    the points its thinner neighbour gave one of them). A thin patch (one quad across an
-    air gap between the boundary and an interface, or between an interface and a trace
-    passing close to it) whose other side is split unevenly (the interface's model points,
-    the ends of traces from the other side) would otherwise have its quads sheared by up to
-    a quad's length across their thickness. A thicker patch keeps them uniform: even
-    spacing in the map is what the map's conformality wants there, and points moved by up
-    to a quad along a side several quads from the uneven one skewed the quads at it."""
+    k/n). An arc that is a whole side by itself (but for zero arcs) of a patch thinner than
+    :data:`FACING_BELOW` quads has them across from the opposite side's points (at their
+    lengths along that side, scaled to this one), not uniform; of the patches it is such a
+    side of (a boundary arc has one, a trace or a curve two), the thinnest (the least
+    length across, in the map) sets them, the thinnest patches first (so that a patch whose
+    two sides are single arcs passes on the points its thinner neighbour gave one of them).
+    A thin patch (one quad across an air gap between the boundary and an interface, or
+    between an interface and a trace passing close to it) whose other side is split
+    unevenly (the interface's model points, the ends of traces from the other side) would
+    otherwise have its quads sheared by up to a quad's length across their thickness. A
+    thicker patch keeps them uniform: even spacing in the map is what the map's
+    conformality wants there, and points moved by up to a quad along a side several quads
+    from the uneven one skewed the quads at it."""
     fractions: list = [None] * len(lay.arcs)
     candidates = []
     for p, sides in enumerate(lay.patches):
