@@ -219,3 +219,53 @@ def test_block_low_rank_factorisation_takes_the_full_rank_steps():
         assert x["H"] == pytest.approx(y["H"], rel=1e-8)
         assert x["gnorm"] == pytest.approx(y["gnorm"], rel=1e-6, abs=1e-12)
     assert blr.krylov_iterations == full.krylov_iterations
+
+
+def _dense(A: PETSc.Mat) -> np.ndarray:
+    """The whole of A as a numpy array on every rank."""
+    first, last = A.getOwnershipRange()
+    n = A.getSize()[1]
+    rows = A.getValues(range(first, last), range(n))
+    return np.vstack(COMM.allgather(rows))
+
+
+@pytest.mark.skipif(not PETSc.Sys.hasExternalPackage("mumps"), reason="MUMPS' inertia")
+def test_negative_pivots_of_the_reduced_matrix_count_its_whole_inertia(piano):
+    """The safeguard's inertia (``negative_pivots``) on the reduced matrix R of the piano's
+    Gauss–Newton model, shifted to be indefinite: MUMPS runs with ICNTL(13) = 1 on more
+    than one rank (a ScaLAPACK root is missing from INFOG(12), and on 2 ranks the sized
+    piano's indefinite exact steps went unseen), its default serially, the user's value
+    where given; the count is that of the dense matrix's eigenvalues (numpy's)."""
+    problem, x = mbo_problem(piano, isotropic=False)
+    with GaussNewtonModel(problem, x, adapt=False) as model:
+        pc = ReducedFactorPC()
+        pc.attach(model, "test_inertia_")
+        A = None
+        try:
+            pc.setUp(None)
+            factor = pc.ksp.getPC().getFactorMatrix()
+            assert factor.getMumpsIcntl(13) == (1 if COMM.size > 1 else 0)
+            A = model.reduced_operator()[1].duplicate(copy=True)
+            eigenvalues = np.linalg.eigvalsh(_dense(A))  # ascending
+            # the shift: the middle of the widest gap in the middle half of the spectrum
+            n = len(eigenvalues)
+            k = n // 4 + int(np.argmax(np.diff(eigenvalues[n // 4: 3 * n // 4])))
+            A.shift(-0.5 * float(eigenvalues[k] + eigenvalues[k + 1]))
+            expected = k + 1
+            assert 0 < expected < len(eigenvalues)
+            pc.ksp.setOperators(A)
+            pc.ksp.setUp()
+            assert pc.negative_pivots() == expected
+        finally:
+            pc.destroy(None)
+            if A is not None:
+                A.destroy()
+        with options_scope([("test_given_reduced_mat_mumps_icntl_13", "0")]):
+            given = ReducedFactorPC()
+            given.attach(model, "test_given_")
+            try:
+                given.setUp(None)
+                assert given.ksp.getPC().getFactorMatrix().getMumpsIcntl(13) == 0
+            finally:
+                given.destroy(None)
+    x.destroy()

@@ -80,6 +80,8 @@ class ReducedFactorPC:
                                "ufl_frames.solvers.solve")
         T, R = self.model.reduced_operator()
         self.ksp.setOperators(R)
+        if self.work is None:
+            self._count_inertia()
         self.ksp.setUp()
         safeguarded = self.model.safeguarded
         self.model.exact_checks += int(safeguarded and self.model.exact)
@@ -91,6 +93,29 @@ class ReducedFactorPC:
             self.ksp.setUp()
         if self.work is None:
             self.work = (R.createVecRight(), R.createVecRight(), T.createVecLeft())
+
+    def _count_inertia(self) -> None:
+        """Make MUMPS count the negative pivots of R in parallel too (ICNTL(13) = 1: no
+        ScaLAPACK on the elimination tree's root), unless the user set
+        ``-<newton prefix>reduced_mat_mumps_icntl_13``; before R's first factorisation.
+
+        With ICNTL(13) = 0, MUMPS' default, a root factorised by ScaLAPACK is missing from
+        INFOG(12) (PETSc's ``MatGetInertia`` refuses it in parallel for that reason), and
+        :meth:`negative_pivots` read 0 on indefinite exact models: on the sized piano at
+        98 146 triangles on 2 ranks none of the finest level's 81 exact factorisations was
+        shifted or fell back, and 29 of its 45 Newton steps were the gradient steps of
+        ``DIVERGED_INDEFINITE_PC`` at the Krylov solve's start; with the root counted, 10
+        steps, as serially (benchmarks/README, "Why the sized piano's Newton steps stopped
+        at Krylov iteration 0 on 2 ranks").
+        """
+        pc = self.ksp.getPC()
+        if self.ksp.getComm().getSize() == 1 or pc.getType() != PETSc.PC.Type.CHOLESKY \
+                or pc.getFactorSolverType() != "mumps":
+            return
+        if PETSc.Options(self.ksp.getOptionsPrefix() or "").hasName("mat_mumps_icntl_13"):
+            return  # the user's choice (MUMPS reads it at the factorisation)
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(13, 1)
 
     def _correct_inertia(self) -> bool:
         """Refactorise an indefinite exact model with the shifts of
